@@ -459,9 +459,11 @@ def corrected_crossing(num_arms, beta, alpha0, p, fraction=1.0) -> float:
 
 def _log1mexp_neg(log_y):
     """ln(1 - y) for y = e^{log_y} < 1."""
-    log_y = _f64(log_y)
-    y = np.exp(log_y)
-    return np.where(log_y > -math.log(2.0), np.log(-np.expm1(log_y)), np.log1p(-y))
+    log_y = np.minimum(_f64(log_y), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(
+            log_y > -math.log(2.0), np.log(-np.expm1(log_y)), np.log1p(-np.exp(log_y))
+        )
 
 
 def certified_ever_pulled_log_bound(log_t, delta, alpha0, p, oracle_eps=0.01):

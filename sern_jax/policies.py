@@ -68,9 +68,9 @@ def softmax_probs(r_hat: Array, alpha: Array) -> Array:
     Returns:
       [K] probabilities. The max is subtracted first, so tiny α gives no NaN or inf.
     """
-    logits = r_hat / alpha
-    logits = logits - jnp.max(logits)
-    w = jnp.exp(logits)
+    # Subtract the max *before* dividing: (r̂ − max r̂)/α ≤ 0, so even α = 1e-30 gives exp(−inf)
+    # = 0 for the others and exactly 1 at the max, never inf − inf.
+    w = jnp.exp((r_hat - jnp.max(r_hat)) / alpha)
     return w / jnp.sum(w)
 
 

@@ -46,8 +46,12 @@ __all__ = [
 
 ENV_STREAM = 0
 AGENT_STREAM = 1
-_EST_NOISE = 2
-_POLICY_NOISE = 3
+# Sub-streams: each is folded into its parent stream once, then per round with fold_in(·, t),
+# so no two purposes ever share a key.
+_ROUNDS = 0  # env: context + reward uniforms / agent: arm uniform
+_PROBLEM = 1  # env: random means
+_EST_NOISE = 1  # agent: oracle estimator noise
+_POLICY_NOISE = 2  # agent: index-policy noise
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +69,8 @@ class RunConfig:
       clip: clip r̂ to [0, 1].
       dtype: ``"float32"`` or ``"float64"`` (the latter inside ``jax.enable_x64()``).
       diagnostics: also accumulate the per-round quantities of Theorem 3 (:class:`Diagnostics`).
+      random_means: draw each seed's means i.i.d. U[0, 1] from its environment stream (the
+        problem's shape is kept, its means ignored): a new random instance per seed.
     """
 
     policy: str = "softmax"
@@ -77,6 +83,7 @@ class RunConfig:
     clip: bool = True
     dtype: str = "float32"
     diagnostics: bool = False
+    random_means: bool = False
 
     @property
     def jnp_dtype(self):
@@ -263,8 +270,14 @@ def make_run(config: RunConfig) -> Callable[[Key, RunParams], RunOutput]:
         key_agent = jax.random.fold_in(key, AGENT_STREAM)
         key_est = jax.random.fold_in(key_agent, _EST_NOISE)
         key_pol = jax.random.fold_in(key_agent, _POLICY_NOISE)
+        key_problem = jax.random.fold_in(key_env, _PROBLEM)
+        key_env = jax.random.fold_in(key_env, _ROUNDS)
+        key_agent = jax.random.fold_in(key_agent, _ROUNDS)
         del key
         problem = params.problem
+        if config.random_means:
+            problem = problem._replace(means=jax.random.uniform(
+                key_problem, problem.means.shape, dtype))
         means = problem.means  # [M, K]
         ctx_cdf = jnp.cumsum(problem.context_probs)
         mean_r = prob_lib.mean_rewards(problem)  # [K]

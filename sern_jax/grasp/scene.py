@@ -3,7 +3,8 @@
 ``build_scene(spec, seed)`` writes an MJCF string, compiles it with MuJoCo, drops the
 object from a random orientation onto the table with native MuJoCo until it rests, and
 returns the ``mujoco.MjModel`` with that resting pose stored in ``model.qpos0`` (so
-``mujoco.MjData(model)`` / ``mjx.make_data`` start with the object at rest).
+``mujoco.MjData(model)`` / ``mjx.make_data`` start with the object at rest;
+:func:`initial_data` also parks the gripper).
 
 Layout (world frame, metres; the table top is the plane z = 0):
 
@@ -14,7 +15,7 @@ Layout (world frame, metres; the table top is the plane z = 0):
 * ``palm``: one body with joints ``palm_x``, ``palm_y``, ``palm_z`` (slides along world
   axes, qpos = world position of the palm) and ``palm_yaw`` (hinge about z, qpos = jaw
   yaw), position actuators of the same names. Gravity-compensated. Parked at
-  ``PARK_POS`` (above any overhead camera) in ``qpos0``.
+  ``PARK_POS`` (above any overhead camera) by :func:`initial_data`.
 * two fingers ``finger_a`` / ``finger_b`` on slides along the palm's x axis; joint qpos
   = distance of that pad's inner face from the grasp centre (0 = closed, ``opening/2`` =
   open); position actuators with force limited to ``finger_force`` newtons.
@@ -376,8 +377,8 @@ def build_scene(
       config: physics and solver settings.
 
     Returns:
-      a compiled ``mujoco.MjModel`` whose ``qpos0`` holds the object's resting pose and
-      the gripper parked open at ``PARK_POS``. Use :func:`scene_ids` for indices and
+      a compiled ``mujoco.MjModel`` whose ``qpos0`` holds the object's resting pose
+      (:func:`initial_data` also parks the gripper open at ``PARK_POS``). Use :func:`scene_ids` for indices and
       :func:`object_pose` for the pose.
 
     Raises:
@@ -390,13 +391,10 @@ def build_scene(
         model = mujoco.MjModel.from_xml_string(xml)
     except ValueError as e:
         raise ValueError(f"object {spec.name!r} does not compile: {e}") from e
-    ids = scene_ids(model)
     pose = resting_pose(model, seed, config.xy_jitter, config.settle_steps)
+    # Only the free joint's qpos0 changes: slide/hinge joints are measured from their
+    # qpos0 in MuJoCo's kinematics, so the gripper joints keep qpos0 = 0.
     set_object_pose(model, pose)
-    data = mujoco.MjData(model)
-    _park_gripper(model, data, ids)
-    model.qpos0[:] = data.qpos
-    model.qpos0[ids.object_qpos : ids.object_qpos + 7] = pose
     return model
 
 

@@ -55,335 +55,394 @@ _CYLINDER = int(mujoco.mjtGeom.mjGEOM_CYLINDER)
 
 @dataclasses.dataclass(frozen=True)
 class CameraConfig:
-  """Static camera settings (anything that changes compiled code, plus defaults).
+    """Static camera settings (anything that changes compiled code, plus defaults).
 
-  Attributes:
-    height: image rows H.
-    width: image columns W.
-    fx: default focal length in pixels along u (becomes a traced param).
-    fy: default focal length in pixels along v.
-    cx: default principal point column; None = (width - 1) / 2.
-    cy: default principal point row; None = (height - 1) / 2.
-    distance: default camera height above the target point, metres.
-    far: depth reported for rays that hit nothing, metres.
-    geomgroup: MuJoCo geom-group mask (6 ints, 1 = visible); () = all groups visible.
-    bodyexclude: body ids whose geoms the camera ignores (e.g. the gripper's bodies).
-    gamma_shape: default shape of the multiplicative gamma noise (Dex-Net: 1000).
-    gp_sigma: default std of the correlated additive noise, metres (Dex-Net: 0.005).
-    gp_scale: the correlated noise lives on a grid this many times coarser than the image.
-  """
+    Attributes:
+        height: image rows H.
+        width: image columns W.
+        fx: default focal length in pixels along u (becomes a traced param).
+        fy: default focal length in pixels along v.
+        cx: default principal point column; None = (width - 1) / 2.
+        cy: default principal point row; None = (height - 1) / 2.
+        distance: default camera height above the target point, metres.
+        far: depth reported for rays that hit nothing, metres.
+        geomgroup: MuJoCo geom-group mask (6 ints, 1 = visible); () = all groups visible.
+        bodyexclude: body ids whose geoms the camera ignores (e.g. the gripper's bodies).
+        gamma_shape: default shape of the multiplicative gamma noise (Dex-Net: 1000).
+        gp_sigma: default std of the correlated additive noise, metres (Dex-Net: 0.005).
+        gp_scale: the correlated noise lives on a grid this many times coarser than the image.
+    """
 
-  height: int = 96
-  width: int = 96
-  fx: float = 175.0
-  fy: float = 175.0
-  cx: float | None = None
-  cy: float | None = None
-  distance: float = 0.6
-  far: float = 2.0
-  geomgroup: tuple[int, ...] = ()
-  bodyexclude: tuple[int, ...] = ()
-  gamma_shape: float = 1000.0
-  gp_sigma: float = 0.005
-  gp_scale: int = 4
+    height: int = 96
+    width: int = 96
+    fx: float = 175.0
+    fy: float = 175.0
+    cx: float | None = None
+    cy: float | None = None
+    distance: float = 0.6
+    far: float = 2.0
+    geomgroup: tuple[int, ...] = ()
+    bodyexclude: tuple[int, ...] = ()
+    gamma_shape: float = 1000.0
+    gp_sigma: float = 0.005
+    gp_scale: int = 4
 
-  def __post_init__(self):
-    for name in ("height", "width", "gp_scale"):
-      value = getattr(self, name)
-      if not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"CameraConfig.{name} must be a positive int, got {value!r}")
-    for name in ("fx", "fy", "distance", "far"):
-      value = getattr(self, name)
-      if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"CameraConfig.{name} must be finite and > 0, got {value!r}")
-    if self.gamma_shape < 0 or self.gp_sigma < 0:
-      raise ValueError(
-          f"noise settings must be >= 0, got gamma_shape={self.gamma_shape!r}, "
-          f"gp_sigma={self.gp_sigma!r}")
-    if self.geomgroup and len(self.geomgroup) != mujoco.mjNGROUP:
-      raise ValueError(
-          f"CameraConfig.geomgroup needs {mujoco.mjNGROUP} entries or none, "
-          f"got {self.geomgroup!r}")
+    def __post_init__(self):
+        for name in ("height", "width", "gp_scale"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(
+                    f"CameraConfig.{name} must be a positive int, got {value!r}"
+                )
+        for name in ("fx", "fy", "distance", "far"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(
+                    f"CameraConfig.{name} must be finite and > 0, got {value!r}"
+                )
+        if self.gamma_shape < 0 or self.gp_sigma < 0:
+            raise ValueError(
+                f"noise settings must be >= 0, got gamma_shape={self.gamma_shape!r}, "
+                f"gp_sigma={self.gp_sigma!r}"
+            )
+        if self.geomgroup and len(self.geomgroup) != mujoco.mjNGROUP:
+            raise ValueError(
+                f"CameraConfig.geomgroup needs {mujoco.mjNGROUP} entries or none, "
+                f"got {self.geomgroup!r}"
+            )
 
-  @property
-  def shape(self) -> tuple[int, int]:
-    return (self.height, self.width)
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
 
-  @property
-  def principal_point(self) -> tuple[float, float]:
-    cx = (self.width - 1) / 2 if self.cx is None else self.cx
-    cy = (self.height - 1) / 2 if self.cy is None else self.cy
-    return cx, cy
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        cx = (self.width - 1) / 2 if self.cx is None else self.cx
+        cy = (self.height - 1) / 2 if self.cy is None else self.cy
+        return cx, cy
 
 
 class CameraParams(NamedTuple):
-  """Traced camera parameters (vmap them to sweep intrinsics or poses)."""
+    """Traced camera parameters (vmap them to sweep intrinsics or poses)."""
 
-  fx: jax.Array  # [] focal length along u, pixels
-  fy: jax.Array  # [] focal length along v, pixels
-  cx: jax.Array  # [] principal point column
-  cy: jax.Array  # [] principal point row
-  pos: jax.Array  # [3] camera centre, world frame, metres
-  rot: jax.Array  # [3, 3] camera-to-world rotation; columns x_c (right), y_c (down), z_c (axis)
-  gamma_shape: jax.Array  # [] multiplicative gamma noise shape; 0 disables that term
-  gp_sigma: jax.Array  # [] correlated additive noise std, metres; 0 disables that term
+    fx: jax.Array  # [] focal length along u, pixels
+    fy: jax.Array  # [] focal length along v, pixels
+    cx: jax.Array  # [] principal point column
+    cy: jax.Array  # [] principal point row
+    pos: jax.Array  # [3] camera centre, world frame, metres
+    rot: jax.Array  # [3, 3] camera-to-world; columns x_c (right), y_c (down), z_c (axis)
+    gamma_shape: jax.Array  # [] multiplicative gamma noise shape; 0 disables it
+    gp_sigma: jax.Array  # [] correlated additive noise std, metres; 0 disables it
 
 
 class GeomPoses(NamedTuple):
-  """The part of mjx.Data a camera reads; an mjx.Data works in its place too."""
+    """The part of mjx.Data a camera reads; an mjx.Data works in its place too."""
 
-  geom_xpos: jax.Array  # [ngeom, 3] geom positions, world frame
-  geom_xmat: jax.Array  # [ngeom, 3, 3] geom orientations, world frame
+    geom_xpos: jax.Array  # [ngeom, 3] geom positions, world frame
+    geom_xmat: jax.Array  # [ngeom, 3, 3] geom orientations, world frame
 
 
 def geom_poses(mj_data: mujoco.MjData) -> GeomPoses:
-  """Geom poses of a native MjData (call mj_forward/mj_kinematics first)."""
-  return GeomPoses(
-      geom_xpos=jnp.asarray(mj_data.geom_xpos, dtype=jnp.float32),
-      geom_xmat=jnp.asarray(mj_data.geom_xmat, dtype=jnp.float32).reshape(-1, 3, 3))
+    """Geom poses of a native MjData (call mj_forward/mj_kinematics first)."""
+    xmat = np.asarray(mj_data.geom_xmat, dtype=np.float32).reshape(-1, 3, 3)
+    return GeomPoses(
+        geom_xpos=jnp.asarray(mj_data.geom_xpos, dtype=jnp.float32),
+        geom_xmat=jnp.asarray(xmat),
+    )
 
 
 class DepthImage(NamedTuple):
-  """A rendered depth image."""
+    """A rendered depth image."""
 
-  depth: jax.Array  # [H, W] float32 planar depth along the optical axis, metres
-  geom: jax.Array  # [H, W] int32 id of the geom each pixel sees, -1 for none
+    depth: jax.Array  # [H, W] float32 planar depth along the optical axis, metres
+    geom: jax.Array  # [H, W] int32 id of the geom each pixel sees, -1 for none
 
 
 # Looking straight down: x_c = +x_w, y_c = -y_w, z_c = -z_w.
-_OVERHEAD_ROT = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
-                         dtype=np.float32)
+_OVERHEAD_ROT = np.array(
+    [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]], dtype=np.float32
+)
 
 
 def overhead_params(config: CameraConfig, target=(0.0, 0.0, 0.0)) -> CameraParams:
-  """Camera `config.distance` straight above `target`, image right = world +x.
+    """Camera `config.distance` straight above `target`, image right = world +x.
 
-  Args:
-    config: camera config (intrinsics and noise defaults).
-    target: [3] world point the optical axis passes through.
+    Args:
+        config: camera config (intrinsics and noise defaults).
+        target: [3] world point the optical axis passes through.
 
-  Returns:
-    CameraParams with float32 leaves.
-  """
-  target = np.asarray(target, dtype=np.float32)
-  if target.shape != (3,) or not np.all(np.isfinite(target)):
-    raise ValueError(f"target must be 3 finite numbers, got {target!r}")
-  cx, cy = config.principal_point
-  f32 = lambda v: jnp.asarray(v, dtype=jnp.float32)
-  return CameraParams(
-      fx=f32(config.fx), fy=f32(config.fy), cx=f32(cx), cy=f32(cy),
-      pos=f32(target + np.array([0.0, 0.0, config.distance], np.float32)),
-      rot=f32(_OVERHEAD_ROT), gamma_shape=f32(config.gamma_shape),
-      gp_sigma=f32(config.gp_sigma))
+    Returns:
+        CameraParams with float32 leaves.
+    """
+    target = np.asarray(target, dtype=np.float32)
+    if target.shape != (3,) or not np.all(np.isfinite(target)):
+        raise ValueError(f"target must be 3 finite numbers, got {target!r}")
+    cx, cy = config.principal_point
+    f32 = lambda v: jnp.asarray(v, dtype=jnp.float32)
+    return CameraParams(
+        fx=f32(config.fx),
+        fy=f32(config.fy),
+        cx=f32(cx),
+        cy=f32(cy),
+        pos=f32(target + np.array([0.0, 0.0, config.distance], np.float32)),
+        rot=f32(_OVERHEAD_ROT),
+        gamma_shape=f32(config.gamma_shape),
+        gp_sigma=f32(config.gp_sigma),
+    )
 
 
 def camera_model(mj_model: mujoco.MjModel) -> mjx.Model:
-  """Puts a copy of `mj_model` on the device for rendering only.
+    """Puts a copy of `mj_model` on the device for rendering only.
 
-  Collisions are switched off in the copy (the camera never collides), so a scene whose
-  geoms MJX cannot collide (cylinders against boxes, say) still renders; a model without
-  materials gets one default material row (see the module docstring).
+    Collisions are switched off in the copy (the camera never collides), so a scene whose
+    geoms MJX cannot collide (cylinders against boxes, say) still renders; a model without
+    materials gets one default material row (see the module docstring).
 
-  Args:
-    mj_model: the scene.
+    Args:
+        mj_model: the scene.
 
-  Returns:
-    An mjx.Model to pass to `render`.
-  """
-  if not isinstance(mj_model, mujoco.MjModel):
-    raise ValueError(f"camera_model needs a mujoco.MjModel, got {type(mj_model).__name__}")
-  model = copy.copy(mj_model)
-  model.geom_contype[:] = 0
-  model.geom_conaffinity[:] = 0
-  try:
-    m = mjx.put_model(model)
-  except NotImplementedError as e:  # explicit <contact><pair>s survive the switch-off
-    raise ValueError(f"camera_model: MJX cannot take this model ({e}); "
-                     f"explicit contact pairs: {model.npair}") from e
-  return ensure_material(m)
+    Returns:
+        An mjx.Model to pass to `render`.
+    """
+    if not isinstance(mj_model, mujoco.MjModel):
+        raise ValueError(
+            f"camera_model needs a mujoco.MjModel, got {type(mj_model).__name__}"
+        )
+    model = copy.copy(mj_model)
+    model.geom_contype[:] = 0
+    model.geom_conaffinity[:] = 0
+    try:
+        m = mjx.put_model(model)
+    except NotImplementedError as e:  # explicit <contact><pair>s survive the switch-off
+        raise ValueError(
+            f"camera_model: MJX cannot take this model ({e}); "
+            f"explicit contact pairs: {model.npair}"
+        ) from e
+    return ensure_material(m)
 
 
 def ensure_material(m: mjx.Model) -> mjx.Model:
-  """Adds one opaque default material row when `m` has none (mjx.ray needs one)."""
-  if m.mat_rgba.shape[0] == 0:
-    m = m.replace(mat_rgba=jnp.ones((1, 4), dtype=jnp.float32))
-  return m
+    """Adds one opaque default material row when `m` has none (mjx.ray needs one)."""
+    if m.mat_rgba.shape[0] == 0:
+        m = m.replace(mat_rgba=jnp.ones((1, 4), dtype=jnp.float32))
+    return m
 
 
 def pixel_rays(config: CameraConfig, params: CameraParams) -> jax.Array:
-  """World-frame ray directions with unit optical-axis component.
+    """World-frame ray directions with unit optical-axis component.
 
-  Returns:
-    [H, W, 3] directions; pos + t * dir is the point at planar depth t.
-  """
-  v, u = jnp.meshgrid(jnp.arange(config.height, dtype=jnp.float32),
-                      jnp.arange(config.width, dtype=jnp.float32), indexing="ij")
-  cam = jnp.stack([(u - params.cx) / params.fx, (v - params.cy) / params.fy,
-                   jnp.ones_like(u)], axis=-1)  # [H, W, 3]
-  return cam @ params.rot.T
+    Returns:
+        [H, W, 3] directions; pos + t * dir is the point at planar depth t.
+    """
+    v, u = jnp.meshgrid(
+        jnp.arange(config.height, dtype=jnp.float32),
+        jnp.arange(config.width, dtype=jnp.float32),
+        indexing="ij",
+    )
+    cam = jnp.stack(
+        [(u - params.cx) / params.fx, (v - params.cy) / params.fy, jnp.ones_like(u)],
+        axis=-1,
+    )  # [H, W, 3]
+    return cam @ params.rot.T
 
 
 def deproject(params: CameraParams, uv: jax.Array, depth: jax.Array) -> jax.Array:
-  """World points at pixel coordinates `uv` and planar depth `depth`.
+    """World points at pixel coordinates `uv` and planar depth `depth`.
 
-  Args:
-    params: camera params.
-    uv: [..., 2] (column u, row v), float pixels.
-    depth: [...] planar depth, metres.
+    Args:
+        params: camera params.
+        uv: [..., 2] (column u, row v), float pixels.
+        depth: [...] planar depth, metres.
 
-  Returns:
-    [..., 3] world points.
-  """
-  cam = jnp.stack([(uv[..., 0] - params.cx) / params.fx,
-                   (uv[..., 1] - params.cy) / params.fy,
-                   jnp.ones_like(uv[..., 0])], axis=-1)
-  return params.pos + depth[..., None] * (cam @ params.rot.T)
+    Returns:
+        [..., 3] world points.
+    """
+    cam = jnp.stack(
+        [
+            (uv[..., 0] - params.cx) / params.fx,
+            (uv[..., 1] - params.cy) / params.fy,
+            jnp.ones_like(uv[..., 0]),
+        ],
+        axis=-1,
+    )
+    pos = params.pos.reshape((1,) * (cam.ndim - 1) + (3,))
+    return pos + depth[..., None] * (cam @ params.rot.T)
 
 
 def project(params: CameraParams, points: jax.Array) -> tuple[jax.Array, jax.Array]:
-  """Pixel coordinates and planar depth of world points.
+    """Pixel coordinates and planar depth of world points.
 
-  Args:
-    params: camera params.
-    points: [..., 3] world points.
+    Args:
+        params: camera params.
+        points: [..., 3] world points.
 
-  Returns:
-    (uv [..., 2] as (column, row), depth [...]).
-  """
-  cam = (points - params.pos) @ params.rot  # [..., 3] camera frame
-  z = cam[..., 2]
-  uv = jnp.stack([params.fx * cam[..., 0] / z + params.cx,
-                  params.fy * cam[..., 1] / z + params.cy], axis=-1)
-  return uv, z
+    Returns:
+        (uv [..., 2] as (column, row), depth [...]).
+    """
+    pos = params.pos.reshape((1,) * (points.ndim - 1) + (3,))
+    cam = (points - pos) @ params.rot  # [..., 3] camera frame
+    z = cam[..., 2]
+    uv = jnp.stack(
+        [params.fx * cam[..., 0] / z + params.cx, params.fy * cam[..., 1] / z + params.cy],
+        axis=-1,
+    )
+    return uv, z
 
 
 def _geom_filter(m: mjx.Model, config: CameraConfig) -> np.ndarray:
-  """Static per-geom mask, the same rules as mjx.ray (flg_static=True)."""
-  keep = np.ones(m.ngeom, dtype=bool)
-  for body in config.bodyexclude:
-    keep &= np.asarray(m.geom_bodyid) != body
-  if config.geomgroup:
-    group = np.asarray(config.geomgroup, dtype=bool)
-    keep &= group[np.clip(np.asarray(m.geom_group), 0, mujoco.mjNGROUP - 1)]
-  return keep
+    """Static per-geom mask, the same rules as mjx.ray (flg_static=True)."""
+    keep = np.ones(m.ngeom, dtype=bool)
+    for body in config.bodyexclude:
+        keep &= np.asarray(m.geom_bodyid) != body
+    if config.geomgroup:
+        group = np.asarray(config.geomgroup, dtype=bool)
+        keep &= group[np.clip(np.asarray(m.geom_group), 0, mujoco.mjNGROUP - 1)]
+    return keep
 
 
 def _ray_cylinder(size: jax.Array, pnt: jax.Array, vec: jax.Array) -> jax.Array:
-  """Ray parameter of the first hit with a z-aligned cylinder, inf for none (local frame).
+    """Ray parameter of the first hit with a z-aligned cylinder, inf for none (local frame).
 
-  Args:
-    size: [>=2] radius, half-height.
-    pnt: [3] ray origin in the cylinder frame.
-    vec: [3] ray direction in the cylinder frame (any length).
+    Args:
+        size: [>=2] radius, half-height.
+        pnt: [3] ray origin in the cylinder frame.
+        vec: [3] ray direction in the cylinder frame (any length).
 
-  Returns:
-    [] smallest t >= 0 with pnt + t vec on the surface, or inf.
-  """
-  radius, half = size[0], size[1]
-  # Round side: |(pnt + t vec)_xy|^2 = r^2, i.e. a t^2 + 2 b t + c = 0.
-  a = vec[0] * vec[0] + vec[1] * vec[1]
-  b = vec[0] * pnt[0] + vec[1] * pnt[1]
-  c = pnt[0] * pnt[0] + pnt[1] * pnt[1] - radius * radius
-  det = b * b - a * c
-  safe_a = jnp.where(a > mujoco.mjMINVAL, a, 1.0)
-  sq = jnp.sqrt(jnp.maximum(det, 0.0))
-  ok = (a > mujoco.mjMINVAL) & (det >= mujoco.mjMINVAL)
-  side = jnp.inf
-  for root in ((-b - sq) / safe_a, (-b + sq) / safe_a):
-    z = pnt[2] + root * vec[2]
-    good = ok & (root >= 0) & (jnp.abs(z) <= half)
-    side = jnp.minimum(side, jnp.where(good, root, jnp.inf))
-  # Flat caps z = +-half.
-  safe_vz = jnp.where(jnp.abs(vec[2]) > mujoco.mjMINVAL, vec[2], 1.0)
-  best = side
-  for cap in (half, -half):
-    t = (cap - pnt[2]) / safe_vz
-    x, y = pnt[0] + t * vec[0], pnt[1] + t * vec[1]
-    good = (jnp.abs(vec[2]) > mujoco.mjMINVAL) & (t >= 0) & (
-        x * x + y * y <= radius * radius)
-    best = jnp.minimum(best, jnp.where(good, t, jnp.inf))
-  return best
-
-
-def _cast(config: CameraConfig, m: mjx.Model, d: mjx.Data | GeomPoses, pnt: jax.Array,
-          vec: jax.Array) -> tuple[jax.Array, jax.Array]:
-  """One ray: mjx.ray for every supported geom type plus our cylinder test."""
-  dist, geom = mjx.ray(m, d, pnt, vec, geomgroup=config.geomgroup,
-                       bodyexclude=list(config.bodyexclude) or -1)
-  dist = jnp.where(geom < 0, jnp.inf, dist)
-  cyl = np.nonzero(_geom_filter(m, config) & (np.asarray(m.geom_type) == _CYLINDER))[0]
-  if cyl.size:
-    xmat, xpos = d.geom_xmat[cyl], d.geom_xpos[cyl]  # [C, 3, 3], [C, 3]
-    lpnt = jnp.einsum("cji,cj->ci", xmat, pnt - xpos)
-    lvec = jnp.einsum("cji,j->ci", xmat, vec)
-    t = jax.vmap(_ray_cylinder)(m.geom_size[cyl], lpnt, lvec)  # [C]
-    # Visibility as in mjx.ray / native mj_ray: a geom with a material is hidden when the
-    # material's alpha is 0, one without when its own rgba alpha is 0.
-    matid = m.geom_matid[cyl]
-    visible = jnp.where(matid >= 0, m.mat_rgba[jnp.maximum(matid, 0), 3] != 0,
-                        m.geom_rgba[cyl, 3] != 0)
-    t = jnp.where(visible, t, jnp.inf)
-    best = jnp.argmin(t)
-    nearer = t[best] < dist
-    dist = jnp.where(nearer, t[best], dist)
-    geom = jnp.where(nearer, jnp.asarray(cyl, dtype=jnp.int32)[best], geom)
-  return dist, geom.astype(jnp.int32)
+    Returns:
+        [] smallest t >= 0 with pnt + t vec on the surface, or inf.
+    """
+    radius, half = size[0], size[1]
+    # Round side: |(pnt + t vec)_xy|^2 = r^2, i.e. a t^2 + 2 b t + c = 0.
+    a = vec[0] * vec[0] + vec[1] * vec[1]
+    b = vec[0] * pnt[0] + vec[1] * pnt[1]
+    c = pnt[0] * pnt[0] + pnt[1] * pnt[1] - radius * radius
+    det = b * b - a * c
+    safe_a = jnp.where(a > mujoco.mjMINVAL, a, 1.0)
+    sq = jnp.sqrt(jnp.maximum(det, 0.0))
+    ok = (a > mujoco.mjMINVAL) & (det >= mujoco.mjMINVAL)
+    side = jnp.inf
+    for root in ((-b - sq) / safe_a, (-b + sq) / safe_a):
+        z = pnt[2] + root * vec[2]
+        good = ok & (root >= 0) & (jnp.abs(z) <= half)
+        side = jnp.minimum(side, jnp.where(good, root, jnp.inf))
+    # Flat caps z = +-half.
+    safe_vz = jnp.where(jnp.abs(vec[2]) > mujoco.mjMINVAL, vec[2], 1.0)
+    best = side
+    for cap in (half, -half):
+        t = (cap - pnt[2]) / safe_vz
+        x, y = pnt[0] + t * vec[0], pnt[1] + t * vec[1]
+        good = (jnp.abs(vec[2]) > mujoco.mjMINVAL) & (t >= 0)
+        good &= x * x + y * y <= radius * radius
+        best = jnp.minimum(best, jnp.where(good, t, jnp.inf))
+    return best
 
 
-def _noise(config: CameraConfig, key: jax.Array, params: CameraParams,
-           depth: jax.Array) -> jax.Array:
-  key_gamma, key_gp = jax.random.split(key)
-  shape = params.gamma_shape
-  safe_shape = jnp.where(shape > 0, shape, 1.0)
-  gamma = jax.random.gamma(key_gamma, safe_shape) / safe_shape
-  gain = jnp.where(shape > 0, gamma, 1.0)
-  coarse = (math.ceil(config.height / config.gp_scale),
-            math.ceil(config.width / config.gp_scale))
-  field = jax.random.normal(key_gp, coarse, dtype=jnp.float32)
-  field = jax.image.resize(field, config.shape, method="bilinear")
-  return depth * gain + params.gp_sigma * field
+def _cast(
+    config: CameraConfig,
+    m: mjx.Model,
+    d: mjx.Data | GeomPoses,
+    pnt: jax.Array,
+    vec: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """One ray: mjx.ray for every supported geom type plus our cylinder test."""
+    # MJX's mesh ray relies on implicit rank promotion ([3, 3] - [3]); allow it there only.
+    with jax.numpy_rank_promotion("allow"):
+        dist, geom = mjx.ray(
+            m,
+            d,
+            pnt,
+            vec,
+            geomgroup=config.geomgroup,
+            bodyexclude=list(config.bodyexclude) or -1,
+        )
+    dist = jnp.where(geom < 0, jnp.inf, dist)
+    cyl = np.nonzero(_geom_filter(m, config) & (np.asarray(m.geom_type) == _CYLINDER))[0]
+    if cyl.size:
+        xmat, xpos = d.geom_xmat[cyl], d.geom_xpos[cyl]  # [C, 3, 3], [C, 3]
+        lpnt = jnp.einsum("cji,cj->ci", xmat, pnt[None, :] - xpos)
+        lvec = jnp.einsum("cji,j->ci", xmat, vec)
+        t = jax.vmap(_ray_cylinder)(m.geom_size[cyl], lpnt, lvec)  # [C]
+        # Visibility as in mjx.ray and native mj_ray: a geom with a material is hidden
+        # when the material's alpha is 0, one without when its own rgba alpha is 0.
+        matid = m.geom_matid[cyl]
+        visible = jnp.where(
+            matid >= 0,
+            m.mat_rgba[jnp.maximum(matid, 0), 3] != 0,
+            m.geom_rgba[cyl, 3] != 0,
+        )
+        t = jnp.where(visible, t, jnp.inf)
+        best = jnp.argmin(t)
+        nearer = t[best] < dist
+        dist = jnp.where(nearer, t[best], dist)
+        geom = jnp.where(nearer, jnp.asarray(cyl, dtype=jnp.int32)[best], geom)
+    return dist, geom.astype(jnp.int32)
 
 
-def render(config: CameraConfig, m: mjx.Model, d: mjx.Data | GeomPoses, params: CameraParams,
-           key: jax.Array | None = None) -> DepthImage:
-  """Renders one depth image (jit and vmap it; see `make_renderer`).
+def _noise(
+    config: CameraConfig, key: jax.Array, params: CameraParams, depth: jax.Array
+) -> jax.Array:
+    """Dex-Net-style sensor noise on a [H, W] depth image; key is consumed."""
+    key_gamma, key_gp = jax.random.split(key)
+    shape = params.gamma_shape
+    safe_shape = jnp.where(shape > 0, shape, 1.0)
+    gamma = jax.random.gamma(key_gamma, safe_shape) / safe_shape
+    gain = jnp.where(shape > 0, gamma, 1.0)
+    coarse = (
+        math.ceil(config.height / config.gp_scale),
+        math.ceil(config.width / config.gp_scale),
+    )
+    field = jax.random.normal(key_gp, coarse, dtype=jnp.float32)
+    field = jax.image.resize(field, config.shape, method="bilinear")
+    return depth * gain + params.gp_sigma * field
 
-  Args:
-    config: static camera config.
-    m: mjx.Model of the scene (`camera_model` gives a render-only one); geom sizes may be
-      batched by the caller's vmap.
-    d: mjx.Data after kinematics, or GeomPoses (only `geom_xpos`, `geom_xmat` are read).
-    params: camera params.
-    key: optional PRNG key for sensor noise; consumed. None = noise-free.
 
-  Returns:
-    DepthImage with depth [H, W] and geom ids [H, W].
-  """
-  m = ensure_material(m)
-  rays = pixel_rays(config, params).reshape(-1, 3)  # [H*W, 3]
-  dist, geom = jax.vmap(lambda vec: _cast(config, m, d, params.pos, vec))(rays)
-  hit = jnp.isfinite(dist)
-  depth = jnp.where(hit, dist, config.far).reshape(config.shape).astype(jnp.float32)
-  geom = jnp.where(hit, geom, -1).reshape(config.shape)
-  if key is not None:
-    depth = jnp.where(geom >= 0, _noise(config, key, params, depth), depth)
-  return DepthImage(depth=depth, geom=geom)
+def render(
+    config: CameraConfig,
+    m: mjx.Model,
+    d: mjx.Data | GeomPoses,
+    params: CameraParams,
+    key: jax.Array | None = None,
+) -> DepthImage:
+    """Renders one depth image (jit and vmap it; see `make_renderer`).
+
+    Args:
+        config: static camera config.
+        m: mjx.Model of the scene (`camera_model` gives a render-only one); geom sizes may be
+            batched by the caller's vmap.
+        d: mjx.Data after kinematics, or GeomPoses (only `geom_xpos`, `geom_xmat` are read).
+        params: camera params.
+        key: optional PRNG key for sensor noise; consumed. None = noise-free.
+
+    Returns:
+        DepthImage with depth [H, W] and geom ids [H, W].
+    """
+    m = ensure_material(m)
+    rays = pixel_rays(config, params).reshape(-1, 3)  # [H*W, 3]
+    dist, geom = jax.vmap(lambda vec: _cast(config, m, d, params.pos, vec))(rays)
+    hit = jnp.isfinite(dist)
+    depth = jnp.where(hit, dist, config.far).reshape(config.shape).astype(jnp.float32)
+    geom = jnp.where(hit, geom, -1).reshape(config.shape)
+    if key is not None:
+        depth = jnp.where(geom >= 0, _noise(config, key, params, depth), depth)
+    return DepthImage(depth=depth, geom=geom)
 
 
 def make_renderer(config: CameraConfig, noise: bool = False):
-  """A jitted renderer batched over scenes.
+    """A jitted renderer batched over scenes.
 
-  Args:
-    config: static camera config.
-    noise: whether the returned function takes keys and adds sensor noise.
+    Args:
+        config: static camera config.
+        noise: whether the returned function takes keys and adds sensor noise.
 
-  Returns:
-    fn(m, d, params[, keys]) -> DepthImage with leaves [B, H, W]; `d`, `params` (and keys)
-    carry a leading batch axis B, `m` is shared. To batch primitive sizes as well, vmap
-    `render` yourself with an in_axes tree for `m`.
-  """
-  if noise:
-    batched = jax.vmap(lambda m, d, p, k: render(config, m, d, p, k), (None, 0, 0, 0))
-  else:
-    batched = jax.vmap(lambda m, d, p: render(config, m, d, p), (None, 0, 0))
-  return jax.jit(batched)
+    Returns:
+        fn(m, d, params[, keys]) -> DepthImage with leaves [B, H, W]; `d`, `params` (and keys)
+        carry a leading batch axis B, `m` is shared. To batch primitive sizes as well, vmap
+        `render` yourself with an in_axes tree for `m`.
+    """
+    if noise:
+        batched = jax.vmap(
+            lambda m, d, p, k: render(config, m, d, p, k), (None, 0, 0, 0)
+        )
+    else:
+        batched = jax.vmap(lambda m, d, p: render(config, m, d, p), (None, 0, 0))
+    return jax.jit(batched)

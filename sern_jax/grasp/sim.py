@@ -17,8 +17,9 @@ One trial (``TrialConfig`` defaults, 5 ms steps, 290 steps = 1.45 s simulated):
 
 Success: the trial stayed finite, the object rose at least ``success_lift`` (10 cm)
 above its start, and the jaws are not closed on nothing (gap > 2 mm): the object is held
-between the fingers above the lift threshold. A trial with any non-finite state is
-flagged ``nan`` and is never a success (it counts as a failure in probabilities, and
+between the fingers above the lift threshold. A trial that diverged (any non-finite
+state, |qpos| >= 1e3, |qvel| >= 1e5, or, natively, a MuJoCo instability warning, at
+which ``mujoco.rollout`` stops the trial) is flagged ``nan`` and is never a success (it counts as a failure in probabilities, and
 ``nan`` counts are returned next to them).
 
 Randomisation (why outcomes are Bernoulli), drawn per trial by :func:`sample_noise`:
@@ -59,6 +60,8 @@ BACKENDS = ("native", "mjx")
 GRASP_XY_LIMIT = 0.5  # |x|, |y| of a grasp must lie on the 1 m table
 GRASP_Z_RANGE = (-0.05, 0.5)
 MIN_GRASP_Z = scene_lib.PAD_HALF[2] + 0.002  # pads stay 2 mm above the table
+QPOS_LIMIT = 1e3  # |qpos| beyond this (m or rad) = diverged
+QVEL_LIMIT = 1e5  # |qvel| beyond this = diverged
 
 
 @dataclasses.dataclass(frozen=True)
@@ -372,7 +375,21 @@ class _NativeRunner:
             state, _ = mj_rollout.rollout(
                 models, self.datas, state0[lo:hi], ctrl[lo:hi], persistent_pool=True
             )
-            finite = np.isfinite(state).all(axis=(1, 2))
+            nq, nv = self.model.nq, self.model.nv
+            qpos_t = state[:, :, q : q + nq]
+            qvel_t = state[:, :, q + nq : q + nq + nv]
+            # mujoco.rollout stops stepping a trial at a MuJoCo warning (e.g. bad
+            # qacc) and repeats its last state: a final time short of the schedule
+            # means the trial diverged, even if that state is finite.
+            expected_t = (
+                self.state0[0] + self.config.num_steps * self.model.opt.timestep
+            )
+            finite = (
+                np.isfinite(state).all(axis=(1, 2))
+                & (np.abs(qpos_t) < QPOS_LIMIT).all(axis=(1, 2))
+                & (np.abs(qvel_t) < QVEL_LIMIT).all(axis=(1, 2))
+                & (np.abs(state[:, -1, 0] - expected_t) < 0.5 * self.model.opt.timestep)
+            )
             last = state[:, -1]
             nan[lo:hi] = ~finite
             rise[lo:hi] = last[:, q + ids.object_qpos + 2] - z0[lo:hi]
@@ -412,7 +429,9 @@ def _mjx_program(
             d, finite = carry
             d = mjx.step(m, d.replace(ctrl=ctrl_t))
             finite = (
-                finite & jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel))
+                finite
+                & jnp.all(jnp.abs(d.qpos) < QPOS_LIMIT)  # False for NaN too
+                & jnp.all(jnp.abs(d.qvel) < QVEL_LIMIT)
             )
             return (d, finite), None
 

@@ -1,0 +1,377 @@
+"""``sern bench grasp``: throughput of the grasp pipeline, one JSON object.
+
+Measures, on the scene of one object (default ``small_box``):
+
+* grasp trials/s for each backend (native ``mujoco.rollout``, MJX) at a few batch sizes,
+  best of ``--repeats`` timed calls after one warm-up call (whose extra time is
+  ``compile_s`` for MJX);
+* depth images/s (``depth.make_renderer``) and candidate sets/s
+  (``candidates.make_sampler``) at ``--depth-batch`` images;
+* a time split per stage (scene build, depth per image, candidates per set, one trial per
+  backend);
+* optionally (``--agreement N``) the paired native-vs-MJX agreement of trial outcomes on
+  N trials per object over ``--agreement-objects`` (one MJX compile per object shape).
+
+Every figure is measured in this run on this machine (``machine`` in the output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Registers ``grasp`` under the ``sern bench`` subcommands."""
+    p = subparsers.add_parser(
+        "grasp",
+        help="grasp simulator throughput (trials/s per backend, depth, candidates)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--json", action="store_true", help="print only the JSON object")
+    p.add_argument(
+        "--object", default="small_box", help="object name or .obj/.stl path"
+    )
+    p.add_argument("--native-batch", default="64,256", help="native batch sizes (csv)")
+    p.add_argument(
+        "--mjx-batch", default="16,64", help="MJX batch sizes (csv); '' skips"
+    )
+    p.add_argument("--depth-batch", type=int, default=16, help="images per depth call")
+    p.add_argument("--threads", type=int, default=None, help="native threads")
+    p.add_argument("--repeats", type=int, default=2, help="timed calls per setting")
+    p.add_argument(
+        "--agreement",
+        type=int,
+        default=0,
+        help="paired native/MJX trials per object (0 = skip)",
+    )
+    p.add_argument(
+        "--agreement-objects",
+        default="small_box,sphere,capsule,l_shape,cylinder,triangular_prism",
+        help="objects for --agreement (csv)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="small sizes: native 32, MJX 8, depth 4, 1 repeat",
+    )
+    p.add_argument("--out", default=None, help="also write the JSON to this file")
+    p.set_defaults(func=run)
+    return p
+
+
+def _csv_ints(text: str, name: str) -> list[int]:
+    if not text.strip():
+        return []
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError as e:
+        raise ValueError(f"{name} must be comma-separated ints, got {text!r}") from e
+    if min(values) < 1:
+        raise ValueError(f"{name} must be >= 1, got {values}")
+    return values
+
+
+def _machine() -> dict:
+    import jax
+
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "jax_backend": jax.default_backend(),
+        "jax_devices": [str(d) for d in jax.devices()],
+        "python": sys.version.split()[0],
+    }
+
+
+def _centre_grasps(model, n):
+    """n grasps across the object's narrowest horizontal side at its centre."""
+    import numpy as np
+
+    from sern_jax.grasp import scene as scene_lib
+
+    data = scene_lib.initial_data(model)
+    ids = scene_lib.scene_ids(model)
+    centre = data.xipos[ids.object_body]
+    best = (np.inf, 0.0)
+    verts = _object_points(model, data, ids)
+    for th in np.linspace(-np.pi / 2, np.pi / 2, 36, endpoint=False):
+        u = np.array([np.cos(th), np.sin(th)])
+        w = np.ptp(verts[:, :2] @ u)
+        best = min(best, (w, th))
+    grasp = np.array([centre[0], centre[1], centre[2], best[1]])
+    return np.tile(grasp, (n, 1))
+
+
+def _object_points(model, data, ids):
+    """World points sampling the object's geoms (box corners, mesh vertices, ...)."""
+    import mujoco
+    import numpy as np
+
+    pts = []
+    for g in ids.object_geoms:
+        pos, mat = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+        size, t = model.geom_size[g], model.geom_type[g]
+        if t == mujoco.mjtGeom.mjGEOM_MESH:
+            m = model.geom_dataid[g]
+            a, k = model.mesh_vertadr[m], model.mesh_vertnum[m]
+            local = model.mesh_vert[a : a + k]
+        elif t == mujoco.mjtGeom.mjGEOM_BOX:
+            local = (
+                np.array(
+                    [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+                )
+                * size
+            )
+        else:  # sphere / capsule: axis extremes
+            r = size[0]
+            h = size[1] if t == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
+            local = np.array(
+                [
+                    [r, 0, 0],
+                    [-r, 0, 0],
+                    [0, r, 0],
+                    [0, -r, 0],
+                    [0, 0, r + h],
+                    [0, 0, -r - h],
+                ]
+            )
+        pts.append(local @ mat.T + pos)
+    return np.concatenate(pts)
+
+
+def random_grasps(model, key, n):
+    """n grasps near the object: centre + U[±2 cm] in x, y, θ ~ U[-π/2, π/2)."""
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp import scene as scene_lib
+
+    data = scene_lib.initial_data(model)
+    ids = scene_lib.scene_ids(model)
+    centre = data.xipos[ids.object_body]
+    u = np.asarray(jax.random.uniform(key, (n, 3)), np.float64)
+    g = np.empty((n, 4))
+    g[:, 0] = centre[0] + (u[:, 0] * 2 - 1) * 0.02
+    g[:, 1] = centre[1] + (u[:, 1] * 2 - 1) * 0.02
+    g[:, 2] = centre[2]
+    g[:, 3] = (u[:, 2] - 0.5) * np.pi
+    return g
+
+
+def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict:
+    """Paired native vs MJX outcomes on the same grasps and noise, per object."""
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp import scene as scene_lib
+    from sern_jax.grasp import sim
+
+    per_object, agree, total = {}, 0, 0
+    root = jax.random.key(seed)
+    for i, name in enumerate(objects):
+        spec = objects_lib.resolve_object(name)
+        model = scene_lib.build_scene(spec, seed=i)
+        key = jax.random.fold_in(root, i)
+        k_grasp, k_noise = jax.random.split(key)
+        grasps = random_grasps(model, k_grasp, trials_per_object)
+        noise = sim.sample_noise(k_noise, trials_per_object)
+        t0 = time.perf_counter()
+        native = sim.GraspSimulator(model, "native").run_trials(grasps, noise)
+        t1 = time.perf_counter()
+        mjx = sim.GraspSimulator(model, "mjx").run_trials(grasps, noise)
+        t2 = time.perf_counter()
+        stats = sim.agreement(native, mjx)
+        stats.update(native_s=round(t1 - t0, 3), mjx_s_incl_compile=round(t2 - t1, 3))
+        per_object[name] = stats
+        agree += int(np.sum(native.success == mjx.success))
+        total += trials_per_object
+        if progress:
+            progress(name, stats)
+    return {
+        "objects": per_object,
+        "num_trials": total,
+        "agreement": agree / total if total else None,
+    }
+
+
+def run(args) -> int:
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp import scene as scene_lib
+    from sern_jax.grasp import sim
+
+    try:
+        native_batches = (
+            [32] if args.quick else _csv_ints(args.native_batch, "--native-batch")
+        )
+        mjx_batches = [8] if args.quick else _csv_ints(args.mjx_batch, "--mjx-batch")
+        depth_batch = 4 if args.quick else args.depth_batch
+        repeats = 1 if args.quick else args.repeats
+        if depth_batch < 0 or repeats < 1:
+            raise ValueError(
+                f"--depth-batch >= 0 and --repeats >= 1, got {depth_batch}, {repeats}"
+            )
+        spec = objects_lib.resolve_object(args.object)
+    except ValueError as e:
+        print(f"sern bench grasp: {e}", file=sys.stderr)
+        return 2
+
+    def log(msg):
+        if not args.json:
+            print(msg, file=sys.stderr, flush=True)
+
+    out = {"benchmark": "grasp", "object": spec.name, "machine": _machine()}
+    config = sim.TrialConfig()
+    out["trial_steps"] = config.num_steps
+    t0 = time.perf_counter()
+    model = scene_lib.build_scene(spec, seed=0)
+    stages = {"scene_build_s": time.perf_counter() - t0}
+    out["timestep"] = float(model.opt.timestep)
+    key = jax.random.key(0)
+    grasps_all = _centre_grasps(model, max(native_batches + mjx_batches + [1]))
+
+    def time_backend(backend, batches, **kw):
+        results, compile_s = [], None
+        simulator = sim.GraspSimulator(model, backend, **kw)
+        for b in batches:
+            noise = sim.sample_noise(jax.random.fold_in(key, b), b)
+            g = grasps_all[:b]
+            t = time.perf_counter()
+            res = simulator.run_trials(g, noise)
+            first = time.perf_counter() - t
+            best = np.inf
+            for _ in range(repeats):
+                t = time.perf_counter()
+                res = simulator.run_trials(g, noise)
+                best = min(best, time.perf_counter() - t)
+            if compile_s is None:
+                compile_s = max(first - best, 0.0)
+            row = {
+                "batch": b,
+                "trials_per_s": b / best,
+                "physics_steps_per_s": b * config.num_steps / best,
+                "seconds": best,
+                "first_call_s": first,
+                "success_rate": float(res.success.mean()),
+                "nan": int(res.nan.sum()),
+            }
+            log(
+                f"{backend:6s} batch {b:6d}: {row['trials_per_s']:9.1f} trials/s "
+                f"(first call {first:.1f} s, success {row['success_rate']:.2f})"
+            )
+            results.append(row)
+        return results, compile_s
+
+    backends = {}
+    threads = args.threads or os.cpu_count()
+    if native_batches:
+        rows, _ = time_backend("native", native_batches, num_threads=threads)
+        backends["native"] = {"threads": threads, "batches": rows}
+        stages["native_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
+    if mjx_batches:
+        rows, compile_s = time_backend("mjx", mjx_batches)
+        backends["mjx"] = {"batches": rows, "compile_s": compile_s}
+        stages["mjx_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
+    out["backends"] = backends
+
+    # Depth images and candidate sets (Grasp B's modules).
+    if depth_batch:
+        try:
+            from sern_jax.grasp import candidates as cand_lib
+            from sern_jax.grasp import depth as depth_lib
+        except ImportError as e:  # pragma: no cover - depends on the other module
+            out["depth"] = out["candidates"] = f"not available: {e}"
+        else:
+            cam = depth_lib.CameraConfig()
+            params = depth_lib.overhead_params(cam)
+            mx = depth_lib.camera_model(model)
+            poses = depth_lib.geom_poses(scene_lib.initial_data(model))
+            batch_poses = jax.tree.map(
+                lambda a: jax.numpy.broadcast_to(a, (depth_batch, *a.shape)), poses
+            )
+            batch_params = jax.tree.map(
+                lambda a: jax.numpy.broadcast_to(a, (depth_batch, *jax.numpy.shape(a))),
+                params,
+            )
+            render = depth_lib.make_renderer(cam)
+            t = time.perf_counter()
+            img = jax.block_until_ready(render(mx, batch_poses, batch_params))
+            first = time.perf_counter() - t
+            best = np.inf
+            for _ in range(repeats):
+                t = time.perf_counter()
+                img = jax.block_until_ready(render(mx, batch_poses, batch_params))
+                best = min(best, time.perf_counter() - t)
+            out["depth"] = {
+                "batch": depth_batch,
+                "shape": list(cam.shape),
+                "images_per_s": depth_batch / best,
+                "compile_s": max(first - best, 0.0),
+            }
+            stages["depth_image_s"] = best / depth_batch
+            log(f"depth  batch {depth_batch:6d}: {depth_batch / best:9.1f} images/s")
+            sampler = cand_lib.make_sampler(cand_lib.CandidateConfig())
+            keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(
+                jax.numpy.arange(depth_batch)
+            )
+            t = time.perf_counter()
+            c = jax.block_until_ready(sampler(keys, img.depth, params))
+            first = time.perf_counter() - t
+            best = np.inf
+            for _ in range(repeats):
+                t = time.perf_counter()
+                c = jax.block_until_ready(sampler(keys, img.depth, params))
+                best = min(best, time.perf_counter() - t)
+            out["candidates"] = {
+                "batch": depth_batch,
+                "num_candidates": int(c.grasps.shape[-2]),
+                "sets_per_s": depth_batch / best,
+                "valid_fraction": float(np.mean(c.valid)),
+                "compile_s": max(first - best, 0.0),
+            }
+            stages["candidate_set_s"] = best / depth_batch
+            log(f"cands  batch {depth_batch:6d}: {depth_batch / best:9.1f} sets/s")
+    out["stages"] = stages
+
+    if args.agreement:
+        names = [n for n in args.agreement_objects.split(",") if n]
+        out["agreement"] = measure_agreement(
+            names,
+            args.agreement,
+            progress=lambda n, s: log(
+                f"agreement {n}: {s['agreement']:.3f} "
+                f"(native {s['success_native']:.2f}, "
+                f"mjx {s['success_mjx']:.2f})"
+            ),
+        )
+        log(f"agreement overall: {out['agreement']['agreement']:.3f}")
+
+    text = json.dumps(out, indent=None if args.json else 2, default=float)
+    print(text)
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(text + "\n")
+    return 0
+
+
+def main(argv=None) -> int:
+    """``python -m sern_jax.grasp.bench`` without the lead's cli."""
+    parser = argparse.ArgumentParser(prog="sern bench")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_parser(sub)
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -15,6 +15,7 @@ from sern_jax.grasp import depth as dp
 # a mesh, and a "gripper" body in geom group 3 hovering over the objects.
 _SCENE = """
 <mujoco>
+  <compiler angle="radian"/>
   <asset>
     <mesh name="wedge" vertex="0 0 0  0.04 0 0  0 0.03 0  0 0 0.03  0.04 0 0.03  0 0.03 0.03"/>
   </asset>
@@ -58,6 +59,11 @@ def scene():
 @pytest.fixture(scope="session")
 def small_render():
     return jax.jit(lambda m, d, p: dp.render(_SMALL, m, d, p))
+
+
+@pytest.fixture(scope="session")
+def batched_render():
+    return dp.make_renderer(_SMALL)
 
 
 def _native(mj_model, mj_data, params, config, geomgroup=None, bodyexclude=-1):
@@ -122,20 +128,22 @@ def test_no_material_model_needs_and_gets_a_default_material(scene):
     assert dp.camera_model(with_mat).mat_rgba.shape == (1, 4)  # left as it was
 
 
-def test_gripper_excluded_by_geomgroup_and_bodyexclude(scene):
+def test_gripper_excluded_by_geomgroup_and_bodyexclude(scene, small_render):
     mj_model, mj_data = scene
     palm = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, "palm")
     gripper = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, "gripper")
     m = dp.camera_model(mj_model)
     poses = dp.geom_poses(mj_data)
     configs = {
-        "all": _SMALL,
         "group": dataclasses.replace(_SMALL, geomgroup=_NO_GRIPPER),
         "body": dataclasses.replace(_SMALL, bodyexclude=(gripper,)),
     }
     params = dp.overhead_params(_SMALL, target=(0.03, 0.02, 0.0))
-    images = {k: jax.jit(lambda m, d, p, c=c: dp.render(c, m, d, p))(m, poses, params)
-              for k, c in configs.items()}
+    images = {
+        k: jax.jit(lambda m, d, p, c=c: dp.render(c, m, d, p))(m, poses, params)
+        for k, c in configs.items()
+    }
+    images["all"] = small_render(m, poses, params)
     assert np.any(np.asarray(images["all"].geom) == palm)
     for key in ("group", "body"):
         assert not np.any(np.asarray(images[key].geom) == palm), key
@@ -158,13 +166,13 @@ def _poses(mj_model, mj_data, shifts):
     return jax.tree.map(lambda *x: jnp.stack(x), *out)
 
 
-def test_batched_equals_unbatched(scene, small_render):
+def test_batched_equals_unbatched(scene, small_render, batched_render):
     mj_model, mj_data = scene
     m = dp.camera_model(mj_model)
     poses = _poses(mj_model, mj_data, [(0.0, 0.0), (0.02, -0.01), (-0.03, 0.02)])
     params = jax.tree.map(lambda x: jnp.stack([x] * 3), dp.overhead_params(_SMALL))
     params = params._replace(pos=params.pos.at[2, 0].add(0.01))  # one camera moved
-    batch = dp.make_renderer(_SMALL)(m, poses, params)
+    batch = batched_render(m, poses, params)
     assert batch.depth.shape == (3, 16, 16)
     assert not np.allclose(batch.depth[0], batch.depth[1])  # the scenes differ
     for i in range(3):
@@ -175,7 +183,7 @@ def test_batched_equals_unbatched(scene, small_render):
         np.testing.assert_array_equal(np.asarray(batch.geom[i]), np.asarray(one.geom))
 
 
-def test_noise_is_keyed(scene):
+def test_noise_is_keyed(scene, batched_render):
     mj_model, mj_data = scene
     m = dp.camera_model(mj_model)
     poses = jax.tree.map(lambda x: jnp.stack([x] * 4), dp.geom_poses(mj_data))
@@ -183,7 +191,7 @@ def test_noise_is_keyed(scene):
     keys = jax.random.split(jax.random.key(0), 4)
     keys = keys.at[1].set(keys[0])  # images 0 and 1 share a key
     noisy = dp.make_renderer(_SMALL, noise=True)(m, poses, params, keys)
-    clean = dp.make_renderer(_SMALL)(m, poses, params)
+    clean = batched_render(m, poses, params)
     depth = np.asarray(noisy.depth)
     np.testing.assert_array_equal(depth[0], depth[1])
     assert not np.array_equal(depth[0], depth[2])

@@ -51,8 +51,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import mujoco
-from mujoco import rollout as mj_rollout
 import numpy as np
+from mujoco import rollout as mj_rollout
 
 from sern_jax.grasp import scene as scene_lib
 
@@ -464,7 +464,18 @@ class _MjxRunner:
         if object_pose is not None:
             a = self.ids.object_qpos
             qpos0[:, a : a + 7] = object_pose
-        finite, rise, gap = self.program(
+        # MJX's own code relies on NumPy rank promotion (mjx/_src/smooth.py), so it is
+        # allowed here even when the caller sets jax_numpy_rank_promotion="raise".
+        with jax.numpy_rank_promotion("allow"):
+            finite, rise, gap = self._call(qpos0, grasps, noise)
+        nan = ~np.asarray(finite)
+        rise = np.where(nan, np.nan, np.asarray(rise, np.float64))
+        gap = np.asarray(gap, np.float64)
+        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
+        return TrialResult(success, nan, rise, gap, "mjx")
+
+    def _call(self, qpos0, grasps, noise):
+        return self.program(
             self.mx,
             jnp.asarray(qpos0),
             jnp.asarray(grasps, jnp.float32),
@@ -472,11 +483,6 @@ class _MjxRunner:
             jnp.asarray(noise.mass_scale, jnp.float32),
             jnp.asarray(noise.grasp_error, jnp.float32),
         )
-        nan = ~np.asarray(finite)
-        rise = np.where(nan, np.nan, np.asarray(rise, np.float64))
-        gap = np.asarray(gap, np.float64)
-        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
-        return TrialResult(success, nan, rise, gap, "mjx")
 
 
 # ----------------------------------------------------------------------------- interface

@@ -67,6 +67,7 @@ class CameraConfig:
         distance: default camera height above the target point, metres.
         far: depth reported for rays that hit nothing, metres.
         geomgroup: MuJoCo geom-group mask (6 ints, 1 = visible); () = all groups visible.
+            The default hides group 3, where ``scene`` puts the gripper.
         bodyexclude: body ids whose geoms the camera ignores (e.g. the gripper's bodies).
         gamma_shape: default shape of the multiplicative gamma noise (Dex-Net: 1000).
         gp_sigma: default std of the correlated additive noise, metres (Dex-Net: 0.005).
@@ -81,7 +82,7 @@ class CameraConfig:
     cy: float | None = None
     distance: float = 0.6
     far: float = 2.0
-    geomgroup: tuple[int, ...] = ()
+    geomgroup: tuple[int, ...] = (1, 1, 1, 0, 1, 1)
     bodyexclude: tuple[int, ...] = ()
     gamma_shape: float = 1000.0
     gp_sigma: float = 0.005

@@ -44,7 +44,7 @@ _SCENE = """
 </mujoco>
 """
 
-_SMALL = dp.CameraConfig(height=16, width=16, fx=22.0, fy=22.0, distance=0.5)
+_SMALL = dp.CameraConfig(height=16, width=16, fx=22.0, fy=22.0, distance=0.5, geomgroup=())
 _NO_GRIPPER = (1, 1, 1, 0, 1, 1)
 
 
@@ -103,7 +103,8 @@ def test_cylinder_is_seen_although_mjx_ray_misses_it(scene):
     m = dp.camera_model(mj_model)
     poses = dp.geom_poses(mj_data)
     centre = mj_data.geom_xpos[cyl]
-    config = dp.CameraConfig(height=5, width=5, fx=400.0, fy=400.0, distance=0.5)
+    config = dp.CameraConfig(height=5, width=5, fx=400.0, fy=400.0, distance=0.5,
+                             geomgroup=())
     params = dp.overhead_params(config, target=(centre[0], centre[1], 0.0))
     image = jax.jit(lambda m, d, p: dp.render(config, m, d, p))(m, poses, params)
     ref_dist, ref_geom = _native(mj_model, mj_data, params, config)
@@ -144,6 +145,7 @@ def test_gripper_excluded_by_geomgroup_and_bodyexclude(scene, small_render):
         for k, c in configs.items()
     }
     images["all"] = small_render(m, poses, params)
+    assert dp.CameraConfig().geomgroup == _NO_GRIPPER  # the default hides the gripper
     assert np.any(np.asarray(images["all"].geom) == palm)
     for key in ("group", "body"):
         assert not np.any(np.asarray(images[key].geom) == palm), key

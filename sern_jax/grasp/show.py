@@ -1,0 +1,329 @@
+"""``sern grasp show``: pictures of one object's grasp context.
+
+For one object (a name from ``objects.object_names()`` or ``--mesh PATH``) at a random
+resting pose (``--seed``), this writes into ``--out``:
+
+* ``figures/depth_candidates.png``: the overhead depth image with the K = 64 antipodal
+  candidates drawn as parallel jaws (two bars at the contacts joined by the closing axis),
+  coloured by their simulated success probability (M randomised trials each, native
+  MuJoCo by default);
+* ``figures/scene.png``: MuJoCo's own renderer, an oblique view of the table and object,
+  and the same view with the gripper posed (open) at the best candidate;
+* ``results.npz`` (depth, candidates, probabilities), ``config.json``, ``metadata.json``.
+
+Rendering needs an OpenGL backend. Headless Linux: ``MUJOCO_GL=egl`` (Mesa's software EGL
+works without a GPU) or ``MUJOCO_GL=osmesa`` (needs Debian's ``libosmesa6``). ``--gl``
+sets MUJOCO_GL for this run; by default an already set MUJOCO_GL is kept, otherwise EGL is
+tried on Linux.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+_DESCRIPTION = """\
+Pictures of one grasp context: an object at a random resting pose on the table, the
+overhead depth image with its 64 antipodal grasp candidates drawn as gripper jaws and
+coloured by simulated success probability (M randomised trials per candidate), and a
+MuJoCo-rendered view of the scene with the gripper at the best candidate.
+
+Writes OUT/figures/depth_candidates.png, OUT/figures/scene.png, OUT/results.npz,
+OUT/config.json and OUT/metadata.json.
+
+Examples:
+  sern grasp show box
+  sern grasp show slim_bottle --seed 3 --trials 32 --out runs/show_bottle
+  sern grasp show --mesh part.stl --mesh-units mm
+"""
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Registers ``show`` under ``sern grasp``."""
+    p = subparsers.add_parser(
+        "show",
+        help="PNGs of an object's depth image, 64 grasp candidates and a rendered scene",
+        description=_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "object",
+        nargs="?",
+        help="object name (see `sern grasp show --list`) or a path to an .obj/.stl mesh",
+    )
+    p.add_argument("--mesh", metavar="PATH", help="a user mesh (.obj/.stl) instead of a name")
+    p.add_argument(
+        "--mesh-units",
+        choices=("auto", "m", "cm", "mm"),
+        default="auto",
+        help="units of the mesh file's coordinates (default auto: objects.load_mesh guesses)",
+    )
+    p.add_argument("--list", action="store_true", help="list the object names and exit")
+    p.add_argument("--out", default=None, help="output directory (default: runs/show_<object>_s<seed>)")
+    p.add_argument("--seed", type=int, default=0, help="resting pose, sampling and trial seed (default 0)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=16,
+        help="randomised trials per candidate for the success probability (default 16); "
+        "0 skips simulation and colours candidates by validity only",
+    )
+    p.add_argument(
+        "--backend",
+        choices=("native", "mjx"),
+        default="native",
+        help="simulator for the trials (default native: MuJoCo C, fastest on CPU)",
+    )
+    p.add_argument("--noise", action="store_true", help="add Dex-Net-style depth sensor noise")
+    p.add_argument(
+        "--gl",
+        choices=("auto", "egl", "osmesa", "glfw"),
+        default="auto",
+        help="OpenGL backend for MuJoCo's renderer (sets MUJOCO_GL); auto keeps an existing "
+        "MUJOCO_GL, else uses egl on Linux",
+    )
+    p.add_argument("--no-render", action="store_true", help="skip the MuJoCo-rendered scene.png")
+    p.set_defaults(func=run)
+    return p
+
+
+def _colour(prob):
+    import matplotlib
+
+    return matplotlib.colormaps["RdYlGn"](prob)
+
+
+def _draw_candidates(path, depth, cands, prob, title, colour_label) -> None:
+    """Depth image with each valid candidate drawn as an open parallel jaw."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(7.2, 6.0), dpi=120)
+    finite = depth[np.isfinite(depth)]
+    im = ax.imshow(depth, cmap="gray_r", vmin=finite.min(), vmax=finite.max())
+    cbar_depth = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
+    cbar_depth.set_label("depth (m)")
+    valid = np.asarray(cands.valid)
+    ends = np.asarray(cands.endpoints)  # [K, 2, 2] (u, v)
+    order = np.argsort(np.where(valid, prob, -1.0))  # best drawn last, on top
+    for k in order:
+        if not valid[k]:
+            continue
+        p1, p2 = ends[k]
+        axis = p2 - p1
+        length = np.linalg.norm(axis)
+        if length == 0:
+            continue
+        axis = axis / length
+        perp = np.array([-axis[1], axis[0]])
+        colour = _colour(float(prob[k]))
+        ax.plot(*np.stack([p1, p2]).T, color=colour, lw=0.9, alpha=0.9)
+        for p, out in ((p1, -1.0), (p2, 1.0)):
+            jaw = p + out * 1.5 * axis  # the jaw sits just outside its contact
+            bar = np.stack([jaw - 2.5 * perp, jaw + 2.5 * perp])
+            ax.plot(*bar.T, color=colour, lw=2.2, solid_capstyle="butt")
+    sm = matplotlib.cm.ScalarMappable(cmap="RdYlGn", norm=matplotlib.colors.Normalize(0, 1))
+    cbar = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.10, location="left")
+    cbar.set_label(colour_label)
+    # Zoom on the object: everything nearer than the table (the image's farthest depth).
+    rows, cols = np.nonzero(depth < finite.max() - 2e-3)
+    if rows.size:
+        pad = 10
+        ax.set_xlim(max(cols.min() - pad, 0) - 0.5, min(cols.max() + pad, depth.shape[1] - 1) + 0.5)
+        ax.set_ylim(min(rows.max() + pad, depth.shape[0] - 1) + 0.5, max(rows.min() - pad, 0) - 0.5)
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("u (px)  [image right = world +x]")
+    ax.set_ylabel("v (px)  [image down = world -y]")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _render_scene(path, model, grasp, title) -> None:
+    """Oblique MuJoCo renders: the scene, and the gripper open at `grasp`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import mujoco
+    import numpy as np
+
+    from sern_jax.grasp import scene as scene_lib
+
+    ids = scene_lib.scene_ids(model)
+    data = scene_lib.initial_data(model)
+    option = mujoco.MjvOption()
+    option.geomgroup[scene_lib.GROUP_GRIPPER] = 0  # the parked gripper would cast a shadow
+    renderer = mujoco.Renderer(model, 480, 640)
+    try:
+        renderer.update_scene(data, camera="view", scene_option=option)
+        plain = renderer.render().copy()
+        option.geomgroup[scene_lib.GROUP_GRIPPER] = 1
+        posed = None
+        if grasp is not None:
+            x, y, z, theta = (float(v) for v in grasp)
+            for adr, v in zip(ids.palm_qpos, (x, y, z + scene_lib.FINGER_DROP, theta)):
+                data.qpos[adr] = v
+            mujoco.mj_kinematics(model, data)
+            renderer.update_scene(data, camera="view", scene_option=option)
+            posed = renderer.render().copy()
+    finally:
+        renderer.close()
+    panels = [("scene (camera 'view')", plain)]
+    if posed is not None:
+        panels.append(("gripper open at the best candidate", posed))
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.4 * len(panels), 5.0), dpi=110)
+    for ax, (name, img) in zip(np.atleast_1d(axes), panels):
+        ax.imshow(img)
+        ax.set_title(name, fontsize=9)
+        ax.axis("off")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run(args) -> int:
+    """Entry point of ``sern grasp show``; returns the exit code."""
+    if args.gl != "auto":
+        os.environ["MUJOCO_GL"] = args.gl
+    elif "MUJOCO_GL" not in os.environ and sys.platform.startswith("linux"):
+        os.environ["MUJOCO_GL"] = "egl"
+
+    from sern_jax.grasp import objects as objects_lib
+
+    if args.list:
+        print("\n".join(objects_lib.object_names()))
+        return 0
+    if args.trials < 0:
+        raise ValueError(f"--trials must be >= 0, got {args.trials}")
+    if (args.object is None) == (args.mesh is None):
+        raise ValueError("give exactly one of OBJECT or --mesh PATH (see --help, --list)")
+    if args.mesh is not None:
+        spec = objects_lib.load_mesh(args.mesh, units=args.mesh_units)
+    elif str(args.object).lower().endswith((".obj", ".stl")):
+        spec = objects_lib.load_mesh(args.object, units=args.mesh_units)
+    else:
+        spec = objects_lib.make_object(args.object)
+
+    import jax
+    import numpy as np
+
+    from sern_jax import io
+    from sern_jax.grasp import candidates as cand_lib
+    from sern_jax.grasp import depth as depth_lib
+    from sern_jax.grasp import scene as scene_lib
+    from sern_jax.grasp import sim as sim_lib
+
+    safe_name = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name)
+    out = args.out or os.path.join("runs", f"show_{safe_name}_s{args.seed}")
+    run_dir = io.make_run_dir(os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out)))
+    root = jax.random.key(args.seed)
+    key_noise, key_cand, key_trials = (jax.random.fold_in(root, i) for i in range(3))
+    timings = {}
+
+    t = time.perf_counter()
+    model = scene_lib.build_scene(spec, seed=args.seed)
+    data = scene_lib.initial_data(model)
+    timings["scene_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    camera = depth_lib.CameraConfig()
+    params = depth_lib.overhead_params(camera)
+    render = jax.jit(lambda m, d, p, k: depth_lib.render(camera, m, d, p, k))
+    render_clean = jax.jit(lambda m, d, p: depth_lib.render(camera, m, d, p))
+    m = depth_lib.camera_model(model)
+    poses = depth_lib.geom_poses(data)
+    image = render(m, poses, params, key_noise) if args.noise else render_clean(m, poses, params)
+    depth = np.asarray(image.depth)
+    timings["depth_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    cand_config = cand_lib.CandidateConfig()
+    cands = jax.jit(lambda k, d, p: cand_lib.sample(cand_config, k, d, p))(
+        key_cand, image.depth, params
+    )
+    cands = jax.tree.map(np.asarray, cands)
+    valid = cands.valid
+    timings["candidates_s"] = time.perf_counter() - t
+    print(f"{spec.name}: {int(valid.sum())}/{len(valid)} valid candidates", flush=True)
+
+    prob = valid.astype(np.float64)
+    colour_label = "valid (no simulation: --trials 0)"
+    backend = None
+    if args.trials and valid.any():
+        t = time.perf_counter()
+        simulator = sim_lib.GraspSimulator(model, backend=args.backend)
+        est = simulator.success_probability(key_trials, cands.grasps, args.trials, valid=valid)
+        prob = np.asarray(est.prob, np.float64)
+        backend = est.backend
+        timings["trials_s"] = time.perf_counter() - t
+        colour_label = f"success probability ({args.trials} trials, {backend})"
+        nan = int(np.sum(est.nan_count))
+        print(
+            f"simulated {int(valid.sum()) * args.trials} trials ({backend}) in "
+            f"{timings['trials_s']:.1f} s; best p = {prob[valid].max():.2f}, "
+            f"mean p = {prob[valid].mean():.2f}, non-finite trials: {nan}",
+            flush=True,
+        )
+
+    figures = run_dir / "figures"
+    title = (
+        f"{spec.name} (seed {args.seed}): {int(valid.sum())} valid of {len(valid)} candidates"
+        + ("" if backend else "; coloured by validity only")
+    )
+    _draw_candidates(figures / "depth_candidates.png", depth, cands, prob, title, colour_label)
+    written = [figures / "depth_candidates.png"]
+
+    best = None
+    if valid.any():
+        best = cands.grasps[int(np.argmax(np.where(valid, prob, -1.0)))]
+    status = 0
+    if not args.no_render:
+        try:
+            _render_scene(figures / "scene.png", model, best, f"{spec.name} (seed {args.seed})")
+            written.append(figures / "scene.png")
+        except Exception as e:  # noqa: BLE001 - any GL failure is reported, not hidden
+            print(
+                f"error: MuJoCo rendering failed with MUJOCO_GL={os.environ.get('MUJOCO_GL')}: "
+                f"{type(e).__name__}: {e}. Try --gl egl or --gl osmesa (apt-get install "
+                "libosmesa6), or --no-render.",
+                file=sys.stderr,
+            )
+            status = 1
+
+    io.save_npz(
+        run_dir / "results.npz",
+        depth=depth,
+        geom=np.asarray(image.geom),
+        grasps=cands.grasps,
+        valid=valid,
+        width=cands.width,
+        endpoints=cands.endpoints,
+        center_px=cands.center_px,
+        angle_px=cands.angle_px,
+        grasp_depth=cands.grasp_depth,
+        prob=prob if backend else np.full(len(valid), np.nan),
+    )
+    io.save_json(
+        run_dir / "config.json",
+        {
+            "object": spec.name,
+            "seed": args.seed,
+            "trials": args.trials,
+            "backend": backend,
+            "noise": bool(args.noise),
+            "camera": camera,
+            "candidates": cand_config,
+            "mujoco_gl": os.environ.get("MUJOCO_GL"),
+        },
+    )
+    io.save_json(run_dir / "metadata.json", io.run_metadata(timings=timings))
+    for path in written:
+        print(f"wrote {path}")
+    return status

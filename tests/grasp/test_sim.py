@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sern_jax.grasp import sim
+
 MJX_BATCH = 8  # must match tests/grasp/conftest.py
 
 

@@ -105,3 +105,14 @@ def test_mjx_flags_nan(box_model, mjx_sim, paired_trials):
     unstable = sim.GraspSimulator(_unstable(box_model), "mjx")  # same program, new model
     res = unstable.run_trials(grasps, noise)
     assert res.nan.all() and not res.success.any()
+
+
+@pytest.mark.slow
+def test_backends_agree_over_objects():
+    """Paired native/MJX outcomes agree on >= 90% of trials (one MJX compile/object)."""
+    from sern_jax.grasp import bench
+
+    result = bench.measure_agreement(["small_box", "sphere", "capsule", "l_shape"], 32)
+    assert result["agreement"] >= 0.9, result
+    for stats in result["objects"].values():
+        assert stats["nan_native"] == 0 and stats["nan_mjx"] == 0, stats

@@ -13,6 +13,8 @@ exact      r                                                     trivially (β =
 addhalf    (S + ½)/(n + 1)                                        fixed n only; β = ½ + ε
 mean       S/n, ½ at n = 0                                        fixed n only; β = 1/√2 + ε
 adv        r_{a*} − (1−ε)β/√(n+1), others r_a + (1−ε)β/√(n+1)    almost surely, worst case
+adv_low    r_{worst} − (1−ε)β/√(n+1), others r_a + (1−ε)β/√(n+1) almost surely; with clip=False its
+                                                                 r̂ range exceeds 1 (breaks Thm 1)
 rademacher r_a + ξ(1−ε)β/√(n+1), ξ = ±1 fresh each round          almost surely
 gauss      r_a + σ_n ξ, σ_n = (1−ε)β/(√(2/π)√(n+1)), ξ ~ N(0,1)  conditional mean only
 flip       1 − r_a w.p. q_n = q_c/√(n+1), else r_a                conditional mean only, heavy tail
@@ -52,13 +54,14 @@ ESTIMATOR_NAMES = (
     "addhalf",
     "mean",
     "adv",
+    "adv_low",
     "rademacher",
     "gauss",
     "flip",
     "pinned",
     "l1median",
 )
-ORACLE_NAMES = ("exact", "adv", "rademacher", "gauss", "flip", "pinned")
+ORACLE_NAMES = ("exact", "adv", "adv_low", "rademacher", "gauss", "flip", "pinned")
 # Estimators whose r̂ in a context changes only for the pulled arm of that context.
 LOCAL_ESTIMATORS = ("exact", "addhalf", "mean", "pinned", "l1median")
 
@@ -178,6 +181,9 @@ def make_estimator(name: str, clip: bool = True) -> Estimator:
         if name == "adv":
             best = jnp.arange(num_arms) == jnp.argmax(means_row)
             return means_row + jnp.where(best, -scale, scale)
+        if name == "adv_low":
+            worst = jnp.arange(num_arms) == jnp.argmin(means_row)
+            return means_row + jnp.where(worst, -scale, scale)
         if name == "rademacher":
             xi = jax.random.rademacher(key, (num_arms,), dtype=dtype)
             return means_row + xi * scale

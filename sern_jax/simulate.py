@@ -114,6 +114,8 @@ class Diagnostics(NamedTuple):
     inv_sqrt_chosen: Array  # Σ_τ (n_{a_τ}(τ−1) + 1)^{-1/2}
     misid: Array  # Σ_τ 1{â*_{τ−1} ≠ a*}; ties count as misidentified
     entropy: Array  # Σ_τ S(π_τ)
+    inv_sqrt_all: Array  # Σ_τ Σ_a (n_a(τ−1) + 1)^{-1/2} (all arms, unweighted)
+    misid_strict: Array  # Σ_τ 1{r̄̂_{a*} < max_{a≠a*} r̄̂_a − 1e-12}: ties count as identified
 
 
 class RunOutput(NamedTuple):
@@ -263,7 +265,7 @@ def make_run(config: RunConfig) -> Callable[[Key, RunParams], RunOutput]:
     ends = grid.astype(np.int32)
     needs_est_noise = config.estimator in ("rademacher", "gauss", "flip")
     needs_pol_noise = config.policy in pol_lib.INDEX_POLICIES
-    num_diag = 8 if config.diagnostics else 0
+    num_diag = len(Diagnostics._fields) if config.diagnostics else 0
 
     def run(key: Key, params: RunParams) -> RunOutput:
         key_env = jax.random.fold_in(key, ENV_STREAM)
@@ -330,10 +332,11 @@ def make_run(config: RunConfig) -> Callable[[Key, RunParams], RunOutput]:
                 r_bar = problem.context_probs @ r_hat_all  # [K]
                 others = jnp.where(jnp.arange(num_arms) == a_star, -jnp.inf, r_bar)
                 misid = (r_bar[a_star] <= jnp.max(others)).astype(dtype)
+                misid_strict = (r_bar[a_star] < jnp.max(others) - 1e-12).astype(dtype)
                 diag = diag + jnp.stack([
                     err[a_star], jnp.dot(probs, err), err[arm],
                     inv_sqrt[a_star], jnp.dot(probs, inv_sqrt), inv_sqrt[arm],
-                    misid, pol_lib.entropy(probs)])
+                    misid, pol_lib.entropy(probs), jnp.sum(inv_sqrt), misid_strict])
             new_est = estimator.update(est, context, arm, reward, jnp.maximum(probs[arm], 1e-30))
             return _Carry(new_est, regret, carry.compensator + probs,
                           jnp.minimum(carry.min_prob, jnp.min(probs)), diag)
@@ -354,7 +357,7 @@ def make_run(config: RunConfig) -> Callable[[Key, RunParams], RunOutput]:
         )
         _, (regret, counts, comp, min_prob, diag) = jax.lax.scan(
             segment, carry0, (jnp.asarray(starts), jnp.asarray(ends)))
-        diag_out = Diagnostics(*[diag[:, i] for i in range(8)]) if config.diagnostics else None
+        diag_out = Diagnostics(*[diag[:, i] for i in range(num_diag)]) if config.diagnostics else None
         return RunOutput(regret=regret[:, 0], regret_paper=regret[:, 1], regret_rb=regret[:, 2],
                          regret_rb_paper=regret[:, 3], counts=counts, compensator=comp,
                          min_prob=min_prob, diag=diag_out)

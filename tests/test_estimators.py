@@ -102,3 +102,12 @@ def test_addhalf_fixed_n_a3_constant():
 def test_unknown_estimator_raises():
     with pytest.raises(ValueError, match="'ridge'"):
         E.make_estimator("ridge")
+
+
+def test_adv_low_pushes_the_worst_arm_down_unclipped():
+    state = E.init_state(1, 3)
+    r_hat = E.make_estimator("adv_low", clip=False).predict(
+        jax.random.key(0), state, jnp.int32(0), MEANS, ORACLE._replace(beta=jnp.asarray(0.9)))
+    d = 0.99 * 0.9
+    np.testing.assert_allclose(np.asarray(r_hat), [0.9 + d, 0.6 + d, 0.2 - d], rtol=1e-6)
+    assert float(r_hat.max() - r_hat.min()) > 1.0  # the range Theorem 1 needs ≤ 1 is exceeded

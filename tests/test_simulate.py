@@ -205,3 +205,20 @@ def test_sharded_equals_unsharded():
     assert report["devices"] == 4
     assert report["counts_equal"]
     assert report["regret_maxdiff"] <= 1e-4
+
+
+def test_diagnostics_exact_oracle_identities():
+    # With r̂ = r every error sum is 0, misidentification never happens (distinct means), the
+    # entropy sum equals T·S(π) for the constant π, and inv_sqrt_all ≥ inv_sqrt_rb.
+    cfg = sim.RunConfig(policy="softmax", estimator="exact", num_arms=3, horizon=64,
+                        num_checkpoints=4, diagnostics=True)
+    prob = problems.bernoulli([0.2, 0.5, 0.9])
+    out = sim.run_seeds(cfg, sim.default_params(cfg, prob, alpha0=0.5), num_seeds=4)
+    d = out.diag
+    for f in ("err_best", "err_rb", "err_chosen", "misid", "misid_strict"):
+        np.testing.assert_allclose(getattr(d, f), 0.0, atol=1e-6)
+    pi = np.exp(np.array([0.2, 0.5, 0.9]) / 0.5)
+    pi /= pi.sum()
+    np.testing.assert_allclose(d.entropy[:, -1], 64 * -(pi * np.log(pi)).sum(), rtol=1e-5)
+    assert np.all(d.inv_sqrt_all >= d.inv_sqrt_rb - 1e-6)
+    np.testing.assert_allclose(d.inv_sqrt_all[:, 0], 3.0, rtol=1e-6)  # t = 1: all counts 0

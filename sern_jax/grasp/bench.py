@@ -4,7 +4,8 @@ Measures, on the scene of one object (default ``small_box``):
 
 * grasp trials/s for each backend (native ``mujoco.rollout``, MJX) at a few batch sizes,
   best of ``--repeats`` timed calls after one warm-up call (whose extra time is
-  ``compile_s`` for MJX);
+  ``compile_s`` for MJX), and trials per CPU-second of this process (all its threads;
+  a figure that other load on a shared machine distorts less than wall-clock time);
 * depth images/s (``depth.make_renderer``) and candidate sets/s
   (``candidates.make_sampler``) at ``--depth-batch`` images;
 * a time split per stage (scene build, depth per image, candidates per set, one trial per
@@ -87,6 +88,7 @@ def _machine() -> dict:
         "jax_backend": jax.default_backend(),
         "jax_devices": [str(d) for d in jax.devices()],
         "python": sys.version.split()[0],
+        "load_average_1m": os.getloadavg()[0],
     }
 
 
@@ -249,11 +251,12 @@ def run(args) -> int:
             t = time.perf_counter()
             res = simulator.run_trials(g, noise)
             first = time.perf_counter() - t
-            best = np.inf
+            best, best_cpu = np.inf, np.inf
             for _ in range(repeats):
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 res = simulator.run_trials(g, noise)
                 best = min(best, time.perf_counter() - t)
+                best_cpu = min(best_cpu, time.process_time() - c)
             if compile_s is None:
                 compile_s = max(first - best, 0.0)
             row = {
@@ -261,6 +264,8 @@ def run(args) -> int:
                 "trials_per_s": b / best,
                 "physics_steps_per_s": b * config.num_steps / best,
                 "seconds": best,
+                "cpu_seconds": best_cpu,
+                "trials_per_cpu_s": b / best_cpu,
                 "first_call_s": first,
                 "success_rate": float(res.success.mean()),
                 "nan": int(res.nan.sum()),

@@ -222,3 +222,33 @@ def test_diagnostics_exact_oracle_identities():
     np.testing.assert_allclose(d.entropy[:, -1], 64 * -(pi * np.log(pi)).sum(), rtol=1e-5)
     assert np.all(d.inv_sqrt_all >= d.inv_sqrt_rb - 1e-6)
     np.testing.assert_allclose(d.inv_sqrt_all[:, 0], 3.0, rtol=1e-6)  # t = 1: all counts 0
+
+
+MEM_SCRIPT = textwrap.dedent("""
+    import json, resource, sys
+    from sern_jax import problems, simulate as sim
+    horizon = int(sys.argv[1])
+    cfg = sim.RunConfig(num_arms=64, horizon=horizon, num_checkpoints=40, random_means=True)
+    params = sim.default_params(cfg, problems.bernoulli([0.5] * 64), alpha0=0.05)
+    out = sim.run_seeds(cfg, params, num_seeds=10_000)
+    assert out.counts.shape == (10_000, sim.checkpoint_times(cfg).size, 64)
+    print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+
+def _peak_rss_mb(horizon):
+    res = subprocess.run([sys.executable, "-c", MEM_SCRIPT, str(horizon)], capture_output=True,
+                         text=True, timeout=3000, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])["peak_rss_mb"]
+
+
+def test_memory_does_not_grow_with_horizon_small():
+    # S = 10,000 seeds, K = 64: peak RSS stays under 2 GiB; memory is O(S·G·K), not O(S·T·K).
+    assert _peak_rss_mb(500) < 2048
+
+
+@pytest.mark.slow
+def test_memory_full_size():
+    # The issue's size: S = 10,000, T = 100,000, K = 64 (10^9 seed-rounds; minutes on 2 cores).
+    assert _peak_rss_mb(100_000) < 2048

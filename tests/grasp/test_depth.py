@@ -18,6 +18,12 @@ _SCENE = """
   <compiler angle="radian"/>
   <asset>
     <mesh name="wedge" vertex="0 0 0  0.04 0 0  0 0.03 0  0 0 0.03  0.04 0 0.03  0 0.03 0.03"/>
+    <!-- a cube with one top corner pushed in: not convex, so mjx.ray's triangles see it -->
+    <mesh name="dent"
+          vertex="0 0 0  .05 0 0  .05 .05 0  0 .05 0  0 0 .05  .05 0 .05  .035 .035 .015
+                  0 .05 .05"
+          face="0 2 1  0 3 2  4 5 6  4 6 7  0 1 5  0 5 4  3 7 6  3 6 2  0 4 7  0 7 3
+                1 2 6  1 6 5"/>
   </asset>
   <worldbody>
     <geom name="table" type="plane" size="0 0 1"/>
@@ -34,7 +40,10 @@ _SCENE = """
       <geom type="ellipsoid" size="0.015 0.02 0.03" pos="-0.06 0 0"/>
     </body>
     <body name="wedge" pos="-0.08 0.06 0">
-      <geom type="mesh" mesh="wedge"/>
+      <geom name="wedge" type="mesh" mesh="wedge"/>
+    </body>
+    <body name="dent" pos="0.07 -0.04 0">
+      <geom name="dent" type="mesh" mesh="dent" contype="0" conaffinity="0"/>
     </body>
     <body name="gripper" pos="0.03 0.02 0.12">
       <geom name="palm" type="box" size="0.05 0.01 0.01" group="3" contype="0"
@@ -79,12 +88,19 @@ def _native(mj_model, mj_data, params, config, geomgroup=None, bodyexclude=-1):
     return dist.reshape(config.shape), geom.reshape(config.shape)
 
 
-def test_parity_with_native_mj_ray(scene, small_render):
-    """16x16 depth equals MuJoCo's own mj_ray within 1e-4 m, over every geom type."""
+@pytest.mark.parametrize("fast_convex_mesh", [True, False])
+def test_parity_with_native_mj_ray(scene, small_render, fast_convex_mesh):
+    """16x16 depth equals MuJoCo's own mj_ray within 1e-4 m, over every geom type, with
+    convex meshes cast as polyhedra (default) or by mjx.ray's triangle test."""
     mj_model, mj_data = scene
     assert mj_model.nmat == 0  # the no-material case that crashes raw mjx.ray
     params = dp.overhead_params(_SMALL, target=(-0.01, -0.01, 0.0))
-    image = small_render(dp.camera_model(mj_model), dp.geom_poses(mj_data), params)
+    if fast_convex_mesh:
+        render = small_render
+    else:
+        config = dataclasses.replace(_SMALL, fast_convex_mesh=False)
+        render = jax.jit(lambda m, d, p: dp.render(config, m, d, p))
+    image = render(dp.camera_model(mj_model), dp.geom_poses(mj_data), params)
     ref_dist, ref_geom = _native(mj_model, mj_data, params, _SMALL)
     assert np.all(ref_dist > 0)  # the table is everywhere
     np.testing.assert_allclose(np.asarray(image.depth), ref_dist, rtol=1e-4, atol=1e-4)
@@ -93,7 +109,19 @@ def test_parity_with_native_mj_ray(scene, small_render):
     same = np.asarray(image.geom) == ref_geom
     assert same.mean() >= 0.98, same.mean()
     types_seen = set(mj_model.geom_type[ref_geom[ref_geom >= 0]].tolist())
-    assert len(types_seen) >= 4, types_seen
+    assert len(types_seen) >= 4 and int(mujoco.mjtGeom.mjGEOM_MESH) in types_seen
+    seen = set(ref_geom.ravel().tolist())
+    for name in ("wedge", "dent"):  # the convex and the non-convex mesh are both in view
+        assert mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, name) in seen, name
+
+
+def test_convexity_check_picks_the_fast_mesh_path(scene):
+    mj_model, _ = scene
+    m = dp.camera_model(mj_model)
+    gid = lambda name: mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, name)
+    wedge = dp._convex_planes(m, gid("wedge"))
+    assert wedge is not None and len(wedge[0]) == 5  # a triangular prism has 5 faces
+    assert dp._convex_planes(m, gid("dent")) is None
 
 
 def test_cylinder_is_seen_although_mjx_ray_misses_it(scene):

@@ -155,7 +155,7 @@ class Check:
 def exact_cell(label, statistic, bound, direction="ge", vacuous=False, **kw) -> Cell:
     """Deterministic (pathwise or closed-form) comparison with relative tolerance 1e-9."""
     s, b = float(statistic), float(bound)
-    tol = REL_TOL * max(abs(b), abs(s), 1e-300)
+    tol = REL_TOL * max(abs(b), abs(s), 1e-300) if math.isfinite(s) and math.isfinite(b) else 0.0
     if direction == "ge":
         violated = s < b - tol
     elif direction == "le":

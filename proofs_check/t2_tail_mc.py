@@ -14,7 +14,7 @@ TRACK = 1  # the worse arm
 
 
 def simulate(ctx):
-    seeds = ctx.num_seeds(8192, 2048)
+    seeds = ctx.num_seeds(8192, 1024)
     runs = {}
     for alpha in (10.0, 100.0):
         runs[alpha] = fw.engine_run(estimator="rademacher", means=MEANS, horizon=1000,

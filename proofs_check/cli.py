@@ -1,0 +1,118 @@
+"""``sern check``: run the theory checks, print a table, write report.md + JSON + figures.
+
+Exit status 0 iff every verdict equals its expectation: claims expected to hold did not FAIL,
+and every negative control / counterexample did FAIL (a negative control that passes means the
+harness is broken). Heavy imports (jax, the checks) happen inside ``run``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+import time
+from pathlib import Path
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Registers ``sern check`` on an argparse subparsers object."""
+    p = subparsers.add_parser(
+        "check",
+        help="numerically check the paper's Theorems 1-5 (exit 0 iff all verdicts as expected)",
+        description=(
+            "Checks Theorems 1-5 of the SERN paper by exact computation and Monte Carlo with "
+            "confidence intervals (see docs/THEORY.md). Each check declares its claim, "
+            "statistic, bound and expected verdict (HOLDS, or FAILS for negative controls and "
+            "counterexamples); the exit status is 0 iff every verdict is the expected one."
+        ),
+    )
+    p.add_argument("--quick", action="store_true",
+                   help="small sizes (minutes on 2 CPU cores); part of the default test run")
+    p.add_argument("--only", nargs="+", metavar="NAME", default=None,
+                   help="run only these checks (names as in the table)")
+    p.add_argument("--seeds", type=int, default=None, metavar="N",
+                   help="override every check's number of seeds")
+    p.add_argument("--json-out", default=None, metavar="FILE",
+                   help="also write the JSON report to FILE")
+    p.add_argument("--out", default="runs", metavar="DIR",
+                   help="root of the run directory (default: runs/)")
+    p.add_argument("--name", default=None, help="run directory name (default: check-<time>)")
+    p.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise error rate per check (default 0.01: 99%% one-sided)")
+    p.add_argument("--seed", type=int, default=0, help="root seed")
+    p.add_argument("--wrong-bounds", action="store_true",
+                   help="harness self-test: use each check's deliberately wrong bound; every "
+                        "verdict should then differ from its expectation")
+    p.add_argument("--no-figures", action="store_true", help="skip writing figures/*.png")
+    p.add_argument("--list", action="store_true", help="list the checks and exit")
+    p.set_defaults(func=run)
+    return p
+
+
+def _validate(args) -> None:
+    if args.seeds is not None and args.seeds < 2:
+        raise ValueError(f"--seeds must be >= 2, got {args.seeds}")
+    if not 0.0 < args.alpha < 0.5:
+        raise ValueError(f"--alpha must lie in (0, 0.5), got {args.alpha}")
+
+
+def run(args) -> int:
+    """Entry point of ``sern check``; returns the exit status."""
+    from proofs_check import registry
+
+    _validate(args)
+    if args.list:
+        for name in registry.NAMES:
+            c = registry.get(name)
+            print(f"{name:28s} expect {c.expected:5s}  {c.claim}")
+        return 0
+    checks = registry.all_checks(args.only)  # ValueError on unknown names, before any compile
+
+    from tqdm import tqdm
+
+    from proofs_check import framework as fw
+    from proofs_check import report
+    from sern_jax import io
+
+    name = args.name or ("check-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+                         + ("-quick" if args.quick else ""))
+    run_dir = io.make_run_dir(args.out, name)
+    bar = tqdm(checks, desc="sern check", unit="check", file=sys.stderr,
+               disable=None)
+    ctx = fw.Context(quick=args.quick, seeds=args.seeds, alpha=args.alpha,
+                     mutate=args.wrong_bounds, root_seed=args.seed,
+                     progress=lambda msg: bar.set_postfix_str(msg[:60], refresh=True))
+    t0 = time.perf_counter()
+    results = []
+    for check in bar:
+        bar.set_description(check.name)
+        results.append(fw.run_check(check, ctx))
+    total = time.perf_counter() - t0
+    bar.close()
+
+    command = "sern check " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["check"] else "sern check"
+    doc = report.build_json(results, args, total, command)
+    io.save_json(run_dir / "report.json", doc)
+    io.save_json(run_dir / "config.json", doc["options"])
+    io.save_json(run_dir / "metadata.json", doc["metadata"])
+    io.save_json(run_dir / "figure_data.json", {r.name: r.figure_data for r in results})
+    (run_dir / "report.md").write_text(report.build_markdown(results, doc))
+    if args.json_out:
+        io.save_json(args.json_out, doc)
+    print(report.table(results))
+    figs_note = ""
+    if not args.no_figures:
+        try:
+            from figures import make_theory_figs
+
+            made = make_theory_figs.make_all(run_dir)
+            figs_note = f", {len(made)} figures"
+        except Exception as exc:  # figures must never hide the verdicts
+            figs_note = f", figures failed: {exc!r}"
+    ok = all(r.ok for r in results)
+    print(f"\n{sum(r.ok for r in results)}/{len(results)} verdicts as expected in {total:.0f} s"
+          f"{figs_note}; report: {run_dir / 'report.md'}")
+    if args.wrong_bounds:
+        print("(--wrong-bounds: deliberately wrong bounds were used; verdicts should differ "
+              "from the expectations)")
+    return 0 if ok else 1

@@ -94,27 +94,43 @@ class CandidateConfig:
         for name in ("num_candidates", "num_edge_samples"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"CandidateConfig.{name} must be an int >= 1, got {value!r}")
-        if self.num_candidates > self.num_edge_samples * (self.num_edge_samples - 1) // 2:
+                raise ValueError(
+                    f"CandidateConfig.{name} must be an int >= 1, got {value!r}"
+                )
+        if (
+            self.num_candidates
+            > self.num_edge_samples * (self.num_edge_samples - 1) // 2
+        ):
             raise ValueError(
                 f"num_candidates={self.num_candidates} exceeds the number of pairs of "
-                f"num_edge_samples={self.num_edge_samples}")
-        if not isinstance(self.boundary_margin, (int, np.integer)) or self.boundary_margin < 0:
-            raise ValueError(f"boundary_margin must be an int >= 0, got {self.boundary_margin!r}")
+                f"num_edge_samples={self.num_edge_samples}"
+            )
+        if (
+            not isinstance(self.boundary_margin, (int, np.integer))
+            or self.boundary_margin < 0
+        ):
+            raise ValueError(
+                f"boundary_margin must be an int >= 0, got {self.boundary_margin!r}"
+            )
         for name in ("blur_sigma", "min_width", "depth_offset_min", "min_height"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"CandidateConfig.{name} must be finite and >= 0, got {value!r}")
+                raise ValueError(
+                    f"CandidateConfig.{name} must be finite and >= 0, got {value!r}"
+                )
         for name in ("grad_thresh", "friction_coef", "max_width"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"CandidateConfig.{name} must be finite and > 0, got {value!r}")
+                raise ValueError(
+                    f"CandidateConfig.{name} must be finite and > 0, got {value!r}"
+                )
         if self.min_width > self.max_width:
             raise ValueError(f"min_width={self.min_width} > max_width={self.max_width}")
         if not self.depth_offset_min <= self.depth_offset_max:
             raise ValueError(
                 f"depth_offset_min={self.depth_offset_min} > "
-                f"depth_offset_max={self.depth_offset_max}")
+                f"depth_offset_max={self.depth_offset_max}"
+            )
         if not math.isfinite(self.table_z):
             raise ValueError(f"table_z must be finite, got {self.table_z!r}")
 
@@ -130,7 +146,9 @@ class Candidates(NamedTuple):
     grasps: jax.Array  # [K, 4] (x, y, z, theta): world metres, radians in [-pi/2, pi/2)
     valid: jax.Array  # [K] bool; invalid slots hold zeros
     width: jax.Array  # [K] contact distance in the table plane, metres
-    endpoints: jax.Array  # [K, 2, 2] the two contact pixels, each (u, v) = (column, row)
+    endpoints: (
+        jax.Array
+    )  # [K, 2, 2] the two contact pixels, each (u, v) = (column, row)
     center_px: jax.Array  # [K, 2] grasp centre pixel (u, v), float
     angle_px: jax.Array  # [K] jaw axis angle in the image, radians, from +u towards +v
     grasp_depth: jax.Array  # [K] planar camera depth of the grasp centre, metres
@@ -167,15 +185,25 @@ def _check_image(config_shape, depth, mask, batched: bool) -> None:
         raise ValueError(f"depth image must be at least 3x3, got shape {shape}")
     if config_shape is not None and shape[-2:] != tuple(config_shape):
         raise ValueError(
-            f"depth image shape {shape[-2:]} does not match the sampler's {tuple(config_shape)}")
+            f"depth image shape {shape[-2:]} does not match the sampler's {tuple(config_shape)}"
+        )
     if not jnp.issubdtype(jnp.result_type(depth), jnp.floating):
-        raise ValueError(f"depth image must be floating point, got dtype {jnp.result_type(depth)}")
+        raise ValueError(
+            f"depth image must be floating point, got dtype {jnp.result_type(depth)}"
+        )
     if mask is not None and tuple(np.shape(mask)) != shape:
-        raise ValueError(f"mask shape {tuple(np.shape(mask))} does not match depth shape {shape}")
+        raise ValueError(
+            f"mask shape {tuple(np.shape(mask))} does not match depth shape {shape}"
+        )
 
 
-def sample(config: CandidateConfig, key: jax.Array, depth: jax.Array,
-           params: depth_lib.CameraParams, mask: jax.Array | None = None) -> Candidates:
+def sample(
+    config: CandidateConfig,
+    key: jax.Array,
+    depth: jax.Array,
+    params: depth_lib.CameraParams,
+    mask: jax.Array | None = None,
+) -> Candidates:
     """Samples K antipodal grasps from one depth image (pure; jit/vmap at the call site).
 
     Args:
@@ -214,9 +242,13 @@ def sample(config: CandidateConfig, key: jax.Array, depth: jax.Array,
     rows, cols = pix // width, pix % width
     uv = jnp.stack([cols, rows], axis=-1).astype(jnp.float32)  # [N, 2]
     normal = jnp.stack([grad_u.reshape(-1)[pix], grad_v.reshape(-1)[pix]], axis=-1)
-    normal = normal / jnp.maximum(jnp.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+    normal = normal / jnp.maximum(
+        jnp.linalg.norm(normal, axis=-1, keepdims=True), 1e-12
+    )
 
-    contact = depth_lib.deproject(params, uv, depth.reshape(-1)[pix])  # [N, 3] on the object
+    contact = depth_lib.deproject(
+        params, uv, depth.reshape(-1)[pix]
+    )  # [N, 3] on the object
 
     # 4. pair tests on the N x N matrix (upper triangle: each unordered pair once).
     diff = uv[:, None, :] - uv[None, :, :]  # [N, N, 2] p_i - p_j
@@ -230,10 +262,24 @@ def sample(config: CandidateConfig, key: jax.Array, depth: jax.Array,
     upper = np.triu(np.ones((n, n), dtype=bool), k=1)
     centre_uv = 0.5 * (uv[:, None, :] + uv[None, :, :])  # [N, N, 2]
     margin = config.boundary_margin
-    inside = ((centre_uv[..., 0] >= margin) & (centre_uv[..., 0] <= width - 1 - margin)
-              & (centre_uv[..., 1] >= margin) & (centre_uv[..., 1] <= height - 1 - margin))
-    keep = (upper & pix_ok[:, None] & pix_ok[None, :] & (dist_px > 0) & opposite & cone_i
-            & cone_j & (width_m >= config.min_width) & (width_m <= config.max_width) & inside)
+    inside = (
+        (centre_uv[..., 0] >= margin)
+        & (centre_uv[..., 0] <= width - 1 - margin)
+        & (centre_uv[..., 1] >= margin)
+        & (centre_uv[..., 1] <= height - 1 - margin)
+    )
+    keep = (
+        upper
+        & pix_ok[:, None]
+        & pix_ok[None, :]
+        & (dist_px > 0)
+        & opposite
+        & cone_i
+        & cone_j
+        & (width_m >= config.min_width)
+        & (width_m <= config.max_width)
+        & inside
+    )
 
     # 5. K kept pairs uniformly without replacement.
     k = config.num_candidates
@@ -248,9 +294,12 @@ def sample(config: CandidateConfig, key: jax.Array, depth: jax.Array,
     centre_px = 0.5 * (uv[i] + uv[j])  # [K, 2]
     centre_pix = jnp.round(centre_px).astype(jnp.int32)
     centre_depth = depth[centre_pix[:, 1], centre_pix[:, 0]]
-    offset = jax.random.uniform(key_depth, (k,), minval=config.depth_offset_min,
-                                maxval=config.depth_offset_max)
-    grasp_point = depth_lib.deproject(params, centre_px, centre_depth + offset)  # [K, 3]
+    offset = jax.random.uniform(
+        key_depth, (k,), minval=config.depth_offset_min, maxval=config.depth_offset_max
+    )
+    grasp_point = depth_lib.deproject(
+        params, centre_px, centre_depth + offset
+    )  # [K, 3]
     xy = 0.5 * (c1[:, :2] + c2[:, :2])
     z = jnp.maximum(grasp_point[:, 2], config.table_z + config.min_height)
     axis = c2[:, :2] - c1[:, :2]
@@ -263,11 +312,20 @@ def sample(config: CandidateConfig, key: jax.Array, depth: jax.Array,
     width_k = jnp.linalg.norm(axis, axis=-1)
     endpoints = jnp.stack([uv[i], uv[j]], axis=1)  # [K, 2, 2]
 
-    zero = lambda x: jnp.where(valid.reshape((k,) + (1,) * (x.ndim - 1)), x, 0).astype(x.dtype)
+    def zero(x):
+        return jnp.where(valid.reshape((k,) + (1,) * (x.ndim - 1)), x, 0).astype(
+            x.dtype
+        )
+
     return Candidates(
-        grasps=zero(grasps), valid=valid, width=zero(width_k), endpoints=zero(endpoints),
-        center_px=zero(centre_uv_out), angle_px=zero(angle_px),
-        grasp_depth=zero(grasp_depth))
+        grasps=zero(grasps),
+        valid=valid,
+        width=zero(width_k),
+        endpoints=zero(endpoints),
+        center_px=zero(centre_uv_out),
+        angle_px=zero(angle_px),
+        grasp_depth=zero(grasp_depth),
+    )
 
 
 def make_sampler(config: CandidateConfig, image_shape: tuple[int, int] | None = None):
@@ -282,21 +340,33 @@ def make_sampler(config: CandidateConfig, image_shape: tuple[int, int] | None = 
       axis B. ``params`` is one CameraParams shared by all images, or one with a leading
       batch axis B on every leaf.
     """
-    shared = jax.jit(jax.vmap(lambda k, d, p, m: sample(config, k, d, p, m), (0, 0, None, 0)))
-    per_image = jax.jit(jax.vmap(lambda k, d, p, m: sample(config, k, d, p, m), (0, 0, 0, 0)))
-    shared_nomask = jax.jit(jax.vmap(lambda k, d, p: sample(config, k, d, p), (0, 0, None)))
-    per_image_nomask = jax.jit(jax.vmap(lambda k, d, p: sample(config, k, d, p), (0, 0, 0)))
+    shared = jax.jit(
+        jax.vmap(lambda k, d, p, m: sample(config, k, d, p, m), (0, 0, None, 0))
+    )
+    per_image = jax.jit(
+        jax.vmap(lambda k, d, p, m: sample(config, k, d, p, m), (0, 0, 0, 0))
+    )
+    shared_nomask = jax.jit(
+        jax.vmap(lambda k, d, p: sample(config, k, d, p), (0, 0, None))
+    )
+    per_image_nomask = jax.jit(
+        jax.vmap(lambda k, d, p: sample(config, k, d, p), (0, 0, 0))
+    )
 
     def run(keys, depth, params, mask=None):
         _check_image(image_shape, depth, mask, batched=True)
         batch = np.shape(depth)[0]
         if tuple(np.shape(keys))[:1] != (batch,):
-            raise ValueError(f"need one key per image: keys shape {np.shape(keys)}, "
-                             f"depth batch {batch}")
+            raise ValueError(
+                f"need one key per image: keys shape {np.shape(keys)}, "
+                f"depth batch {batch}"
+            )
         fx_ndim = np.ndim(params.fx)
         if fx_ndim not in (0, 1) or (fx_ndim == 1 and np.shape(params.fx)[0] != batch):
-            raise ValueError(f"camera params must be shared or batched over {batch} images, "
-                             f"got fx shape {np.shape(params.fx)}")
+            raise ValueError(
+                f"camera params must be shared or batched over {batch} images, "
+                f"got fx shape {np.shape(params.fx)}"
+            )
         if mask is None:
             fn = shared_nomask if fx_ndim == 0 else per_image_nomask
             return fn(keys, depth, params)

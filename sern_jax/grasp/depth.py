@@ -135,7 +135,9 @@ class CameraParams(NamedTuple):
     cx: jax.Array  # [] principal point column
     cy: jax.Array  # [] principal point row
     pos: jax.Array  # [3] camera centre, world frame, metres
-    rot: jax.Array  # [3, 3] camera-to-world; columns x_c (right), y_c (down), z_c (axis)
+    rot: (
+        jax.Array
+    )  # [3, 3] camera-to-world; columns x_c (right), y_c (down), z_c (axis)
     gamma_shape: jax.Array  # [] multiplicative gamma noise shape; 0 disables it
     gp_sigma: jax.Array  # [] correlated additive noise std, metres; 0 disables it
 
@@ -183,7 +185,10 @@ def overhead_params(config: CameraConfig, target=(0.0, 0.0, 0.0)) -> CameraParam
     if target.shape != (3,) or not np.all(np.isfinite(target)):
         raise ValueError(f"target must be 3 finite numbers, got {target!r}")
     cx, cy = config.principal_point
-    f32 = lambda v: jnp.asarray(v, dtype=jnp.float32)
+
+    def f32(v):
+        return jnp.asarray(v, dtype=jnp.float32)
+
     return CameraParams(
         fx=f32(config.fx),
         fy=f32(config.fy),
@@ -288,7 +293,10 @@ def project(params: CameraParams, points: jax.Array) -> tuple[jax.Array, jax.Arr
     cam = (points - pos) @ params.rot  # [..., 3] camera frame
     z = cam[..., 2]
     uv = jnp.stack(
-        [params.fx * cam[..., 0] / z + params.cx, params.fy * cam[..., 1] / z + params.cy],
+        [
+            params.fx * cam[..., 0] / z + params.cx,
+            params.fy * cam[..., 1] / z + params.cy,
+        ],
         axis=-1,
     )
     return uv, z
@@ -369,8 +377,9 @@ def _convex_planes(m: mjx.Model, geom: int) -> tuple[np.ndarray, np.ndarray] | N
     return planes[:, :3], planes[:, 3] * scale
 
 
-def _ray_convex(normal: jax.Array, offset: jax.Array, pnt: jax.Array,
-                vec: jax.Array) -> jax.Array:
+def _ray_convex(
+    normal: jax.Array, offset: jax.Array, pnt: jax.Array, vec: jax.Array
+) -> jax.Array:
     """Ray parameter of the first hit with a convex polyhedron {x: n . x <= d}, or inf.
 
     Args:

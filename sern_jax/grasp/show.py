@@ -53,7 +53,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         nargs="?",
         help="object name (see `sern grasp show --list`) or a path to an .obj/.stl mesh",
     )
-    p.add_argument("--mesh", metavar="PATH", help="a user mesh (.obj/.stl) instead of a name")
+    p.add_argument(
+        "--mesh", metavar="PATH", help="a user mesh (.obj/.stl) instead of a name"
+    )
     p.add_argument(
         "--mesh-units",
         choices=("auto", "m", "cm", "mm"),
@@ -61,8 +63,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="units of the mesh file's coordinates (default auto: objects.load_mesh guesses)",
     )
     p.add_argument("--list", action="store_true", help="list the object names and exit")
-    p.add_argument("--out", default=None, help="output directory (default: runs/show_<object>_s<seed>)")
-    p.add_argument("--seed", type=int, default=0, help="resting pose, sampling and trial seed (default 0)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="output directory (default: runs/show_<object>_s<seed>)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="resting pose, sampling and trial seed (default 0)",
+    )
     p.add_argument(
         "--trials",
         type=int,
@@ -76,7 +87,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default="native",
         help="simulator for the trials (default native: MuJoCo C, fastest on CPU)",
     )
-    p.add_argument("--noise", action="store_true", help="add Dex-Net-style depth sensor noise")
+    p.add_argument(
+        "--noise", action="store_true", help="add Dex-Net-style depth sensor noise"
+    )
     p.add_argument(
         "--gl",
         choices=("auto", "egl", "osmesa", "glfw"),
@@ -84,7 +97,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="OpenGL backend for MuJoCo's renderer (sets MUJOCO_GL); auto keeps an existing "
         "MUJOCO_GL, else uses egl on Linux",
     )
-    p.add_argument("--no-render", action="store_true", help="skip the MuJoCo-rendered scene.png")
+    p.add_argument(
+        "--no-render", action="store_true", help="skip the MuJoCo-rendered scene.png"
+    )
     p.set_defaults(func=run)
     return p
 
@@ -127,15 +142,23 @@ def _draw_candidates(path, depth, cands, prob, title, colour_label) -> None:
             jaw = p + out * 1.5 * axis  # the jaw sits just outside its contact
             bar = np.stack([jaw - 2.5 * perp, jaw + 2.5 * perp])
             ax.plot(*bar.T, color=colour, lw=2.2, solid_capstyle="butt")
-    sm = matplotlib.cm.ScalarMappable(cmap="RdYlGn", norm=matplotlib.colors.Normalize(0, 1))
+    sm = matplotlib.cm.ScalarMappable(
+        cmap="RdYlGn", norm=matplotlib.colors.Normalize(0, 1)
+    )
     cbar = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.10, location="left")
     cbar.set_label(colour_label)
     # Zoom on the object: everything nearer than the table (the image's farthest depth).
     rows, cols = np.nonzero(depth < finite.max() - 2e-3)
     if rows.size:
         pad = 10
-        ax.set_xlim(max(cols.min() - pad, 0) - 0.5, min(cols.max() + pad, depth.shape[1] - 1) + 0.5)
-        ax.set_ylim(min(rows.max() + pad, depth.shape[0] - 1) + 0.5, max(rows.min() - pad, 0) - 0.5)
+        ax.set_xlim(
+            max(cols.min() - pad, 0) - 0.5,
+            min(cols.max() + pad, depth.shape[1] - 1) + 0.5,
+        )
+        ax.set_ylim(
+            min(rows.max() + pad, depth.shape[0] - 1) + 0.5,
+            max(rows.min() - pad, 0) - 0.5,
+        )
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("u (px)  [image right = world +x]")
     ax.set_ylabel("v (px)  [image down = world -y]")
@@ -158,7 +181,9 @@ def _render_scene(path, model, grasp, title) -> None:
     ids = scene_lib.scene_ids(model)
     data = scene_lib.initial_data(model)
     option = mujoco.MjvOption()
-    option.geomgroup[scene_lib.GROUP_GRIPPER] = 0  # the parked gripper would cast a shadow
+    option.geomgroup[scene_lib.GROUP_GRIPPER] = (
+        0  # the parked gripper would cast a shadow
+    )
     renderer = mujoco.Renderer(model, 480, 640)
     try:
         renderer.update_scene(data, camera="view", scene_option=option)
@@ -203,7 +228,9 @@ def run(args) -> int:
     if args.trials < 0:
         raise ValueError(f"--trials must be >= 0, got {args.trials}")
     if (args.object is None) == (args.mesh is None):
-        raise ValueError("give exactly one of OBJECT or --mesh PATH (see --help, --list)")
+        raise ValueError(
+            "give exactly one of OBJECT or --mesh PATH (see --help, --list)"
+        )
     if args.mesh is not None:
         spec = objects_lib.load_mesh(args.mesh, units=args.mesh_units)
     elif str(args.object).lower().endswith((".obj", ".stl")):
@@ -222,7 +249,9 @@ def run(args) -> int:
 
     safe_name = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name)
     out = args.out or os.path.join("runs", f"show_{safe_name}_s{args.seed}")
-    run_dir = io.make_run_dir(os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out)))
+    run_dir = io.make_run_dir(
+        os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out))
+    )
     root = jax.random.key(args.seed)
     key_noise, key_cand, key_trials = (jax.random.fold_in(root, i) for i in range(3))
     timings = {}
@@ -239,7 +268,11 @@ def run(args) -> int:
     render_clean = jax.jit(lambda m, d, p: depth_lib.render(camera, m, d, p))
     m = depth_lib.camera_model(model)
     poses = depth_lib.geom_poses(data)
-    image = render(m, poses, params, key_noise) if args.noise else render_clean(m, poses, params)
+    image = (
+        render(m, poses, params, key_noise)
+        if args.noise
+        else render_clean(m, poses, params)
+    )
     depth = np.asarray(image.depth)
     timings["depth_s"] = time.perf_counter() - t
 
@@ -259,7 +292,9 @@ def run(args) -> int:
     if args.trials and valid.any():
         t = time.perf_counter()
         simulator = sim_lib.GraspSimulator(model, backend=args.backend)
-        est = simulator.success_probability(key_trials, cands.grasps, args.trials, valid=valid)
+        est = simulator.success_probability(
+            key_trials, cands.grasps, args.trials, valid=valid
+        )
         prob = np.asarray(est.prob, np.float64)
         backend = est.backend
         timings["trials_s"] = time.perf_counter() - t
@@ -277,7 +312,9 @@ def run(args) -> int:
         f"{spec.name} (seed {args.seed}): {int(valid.sum())} valid of {len(valid)} candidates"
         + ("" if backend else "; coloured by validity only")
     )
-    _draw_candidates(figures / "depth_candidates.png", depth, cands, prob, title, colour_label)
+    _draw_candidates(
+        figures / "depth_candidates.png", depth, cands, prob, title, colour_label
+    )
     written = [figures / "depth_candidates.png"]
 
     best = None
@@ -286,7 +323,9 @@ def run(args) -> int:
     status = 0
     if not args.no_render:
         try:
-            _render_scene(figures / "scene.png", model, best, f"{spec.name} (seed {args.seed})")
+            _render_scene(
+                figures / "scene.png", model, best, f"{spec.name} (seed {args.seed})"
+            )
             written.append(figures / "scene.png")
         except Exception as e:  # noqa: BLE001 - any GL failure is reported, not hidden
             print(

@@ -78,11 +78,13 @@ def _exit_faces(centre, direction, tol):
             if abs(d[a]) > 1e-12
         )
         exit_point = centre + t * d
-        out.append({
-            (a, math.copysign(1.0, exit_point[a]))
-            for a in (0, 1)
-            if abs(exit_point[a]) >= _HALF[a] - tol
-        })
+        out.append(
+            {
+                (a, math.copysign(1.0, exit_point[a]))
+                for a in (0, 1)
+                if abs(exit_point[a]) >= _HALF[a] - tol
+            }
+        )
     return out
 
 
@@ -158,7 +160,9 @@ def test_keyed_and_batched_equals_unbatched(batch, box_image):
     for i in (0, 1):
         single = one(keys[i], images[i], params)
         for a, b in zip(single, out):
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b[i]), rtol=1e-6, atol=1e-6)
+            np.testing.assert_allclose(
+                np.asarray(a), np.asarray(b[i]), rtol=1e-6, atol=1e-6
+            )
     again = one(keys[0], images[0], params)
     np.testing.assert_array_equal(np.asarray(again.grasps), np.asarray(out.grasps[0]))
 

@@ -53,7 +53,9 @@ _SCENE = """
 </mujoco>
 """
 
-_SMALL = dp.CameraConfig(height=16, width=16, fx=22.0, fy=22.0, distance=0.5, geomgroup=())
+_SMALL = dp.CameraConfig(
+    height=16, width=16, fx=22.0, fy=22.0, distance=0.5, geomgroup=()
+)
 _NO_GRIPPER = (1, 1, 1, 0, 1, 1)
 
 
@@ -111,14 +113,20 @@ def test_parity_with_native_mj_ray(scene, small_render, fast_convex_mesh):
     types_seen = set(mj_model.geom_type[ref_geom[ref_geom >= 0]].tolist())
     assert len(types_seen) >= 4 and int(mujoco.mjtGeom.mjGEOM_MESH) in types_seen
     seen = set(ref_geom.ravel().tolist())
-    for name in ("wedge", "dent"):  # the convex and the non-convex mesh are both in view
+    for name in (
+        "wedge",
+        "dent",
+    ):  # the convex and the non-convex mesh are both in view
         assert mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, name) in seen, name
 
 
 def test_convexity_check_picks_the_fast_mesh_path(scene):
     mj_model, _ = scene
     m = dp.camera_model(mj_model)
-    gid = lambda name: mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, name)
+
+    def gid(name):
+        return mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_GEOM, name)
+
     wedge = dp._convex_planes(m, gid("wedge"))
     assert wedge is not None and len(wedge[0]) == 5  # a triangular prism has 5 faces
     assert dp._convex_planes(m, gid("dent")) is None
@@ -131,8 +139,9 @@ def test_cylinder_is_seen_although_mjx_ray_misses_it(scene):
     m = dp.camera_model(mj_model)
     poses = dp.geom_poses(mj_data)
     centre = mj_data.geom_xpos[cyl]
-    config = dp.CameraConfig(height=5, width=5, fx=400.0, fy=400.0, distance=0.5,
-                             geomgroup=())
+    config = dp.CameraConfig(
+        height=5, width=5, fx=400.0, fy=400.0, distance=0.5, geomgroup=()
+    )
     params = dp.overhead_params(config, target=(centre[0], centre[1], 0.0))
     image = jax.jit(lambda m, d, p: dp.render(config, m, d, p))(m, poses, params)
     ref_dist, ref_geom = _native(mj_model, mj_data, params, config)
@@ -153,7 +162,8 @@ def test_no_material_model_needs_and_gets_a_default_material(scene):
     assert m.mat_rgba.shape == (1, 4)
     assert np.all(np.asarray(m.geom_matid) == -1)  # nothing references the default row
     with_mat = mujoco.MjModel.from_xml_string(
-        _SCENE.replace("<asset>", '<asset><material name="grey" rgba=".5 .5 .5 1"/>'))
+        _SCENE.replace("<asset>", '<asset><material name="grey" rgba=".5 .5 .5 1"/>')
+    )
     assert dp.camera_model(with_mat).mat_rgba.shape == (1, 4)  # left as it was
 
 
@@ -177,8 +187,9 @@ def test_gripper_excluded_by_geomgroup_and_bodyexclude(scene, small_render):
     assert np.any(np.asarray(images["all"].geom) == palm)
     for key in ("group", "body"):
         assert not np.any(np.asarray(images[key].geom) == palm), key
-    np.testing.assert_array_equal(np.asarray(images["group"].depth),
-                                  np.asarray(images["body"].depth))
+    np.testing.assert_array_equal(
+        np.asarray(images["group"].depth), np.asarray(images["body"].depth)
+    )
     ref_dist, _ = _native(mj_model, mj_data, params, _SMALL, geomgroup=_NO_GRIPPER)
     np.testing.assert_allclose(np.asarray(images["group"].depth), ref_dist, atol=1e-4)
 
@@ -206,10 +217,12 @@ def test_batched_equals_unbatched(scene, small_render, batched_render):
     assert batch.depth.shape == (3, 16, 16)
     assert not np.allclose(batch.depth[0], batch.depth[1])  # the scenes differ
     for i in range(3):
-        one = small_render(m, jax.tree.map(lambda x: x[i], poses),
-                           jax.tree.map(lambda x: x[i], params))
-        np.testing.assert_allclose(np.asarray(batch.depth[i]), np.asarray(one.depth),
-                                   rtol=1e-6, atol=1e-6)
+        one = small_render(
+            m, jax.tree.map(lambda x: x[i], poses), jax.tree.map(lambda x: x[i], params)
+        )
+        np.testing.assert_allclose(
+            np.asarray(batch.depth[i]), np.asarray(one.depth), rtol=1e-6, atol=1e-6
+        )
         np.testing.assert_array_equal(np.asarray(batch.geom[i]), np.asarray(one.geom))
 
 

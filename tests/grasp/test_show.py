@@ -24,8 +24,15 @@ def test_help_explains_outputs(capsys):
         parser.parse_args(["show", "--help"])
     assert exc.value.code == 0
     text = capsys.readouterr().out
-    for needle in ("depth_candidates.png", "scene.png", "success probability", "--mesh",
-                   "--seed", "--out", "MUJOCO_GL"):
+    for needle in (
+        "depth_candidates.png",
+        "scene.png",
+        "success probability",
+        "--mesh",
+        "--seed",
+        "--out",
+        "MUJOCO_GL",
+    ):
         assert needle in text, needle
 
 
@@ -49,7 +56,11 @@ def test_show_writes_pictures_and_results(tmp_path):
         f"sys.exit(main(['grasp', 'show', 'small_box', '--trials', '1', '--out', {str(out)!r}]))"
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600
+        [sys.executable, "-c", code],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     import matplotlib.image

@@ -16,7 +16,7 @@ def simulate(ctx):
     out = {}
     for est in ("l1median", "addhalf"):
         res = common.runs_over_horizons(ts, lambda t: fw.alpha_log(1.0, 0.3, t), estimator=est,
-                                        means=MEANS, num_seeds=seeds, seed=ctx.root_seed)
+                                        means=MEANS, num_seeds=seeds, seed=ctx.root_seed, share=ctx.quick)
         out[est] = {t: np.asarray(res[t].regret_rb_paper) / t for t in ts}
     return {"runs": out, "ts": ts, "seeds": seeds}
 

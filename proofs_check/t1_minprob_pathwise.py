@@ -42,7 +42,7 @@ CHECK = fw.Check(
     name="t1_minprob_pathwise",
     claim="Thm 1 (proof): π_t(a) ≥ c = e^{−1/α}/K at every round, hence A_a(t) ≥ ct pathwise",
     configuration="SERN softmax, constant α; clipped estimators {adv, rademacher, gauss, "
-                  "addhalf, exact} × K ∈ {2,10,64} × α ∈ {0.05,0.2,1,5}, T = 5000 (quick: "
+                  "addhalf, exact} × K ∈ {2,10,64} × α ∈ {0.05,0.2,1,5}, T = 2000 (quick: "
                   "{adv,addhalf} × {2,10} × {0.2,1}, T = 500); means linear 0.9→0.1",
     statistic="min over seeds, rounds and arms of π_t(a)/c, and of A_a(t)/(ct) at checkpoints",
     bound="≥ 1 (float64, relative tolerance 1e-9); VACUOUS where cT < 1",

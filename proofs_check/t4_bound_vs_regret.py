@@ -20,7 +20,7 @@ def _grid(ctx):
               itertools.product((2, 10), (0.1, 0.5), (0.2, 0.5), (1.0, 2.0), (0.1, 0.3))]
     combos += [("addhalf", K, 0.5 + 1e-3, d, a0, p) for K, d, a0, p in
                itertools.product((2, 10), (0.2, 0.5), (1.0, 2.0), (0.1, 0.3))]
-    return dict(combos=combos, ts=(100, 1000, 10_000), seeds=ctx.num_seeds(512, 128))
+    return dict(combos=combos, ts=(100, 1000, 10_000), seeds=ctx.num_seeds(256, 128))
 
 
 def simulate(ctx):
@@ -32,7 +32,7 @@ def simulate(ctx):
         oracle = {"beta": beta} if est == "adv" else {}
         res = common.runs_over_horizons(g["ts"], lambda t: fw.alpha_log(a0, p, t),
                                         estimator=est, means=means, num_seeds=g["seeds"],
-                                        seed=ctx.root_seed, **oracle)
+                                        seed=ctx.root_seed, share=ctx.quick, **oracle)
         for t in g["ts"]:
             rows.append(dict(est=est, K=K, beta=beta, d2=d2, alpha0=a0, p=p, T=t,
                              dmax=float(means.max() - means.min()),

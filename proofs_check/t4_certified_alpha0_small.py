@@ -35,7 +35,7 @@ def simulate(ctx):
     a0, p, d = INSTANCES[0]
     res = common.runs_over_horizons(
         ts, lambda t: fw.alpha_log(a0, p, t), estimator="adv", means=[1.0, 1.0 - d],
-        num_seeds=seeds, beta=1.0, oracle_eps=EPS, seed=ctx.root_seed)
+        num_seeds=seeds, beta=1.0, oracle_eps=EPS, seed=ctx.root_seed, share=ctx.quick)
     for t in ts:
         out = res[t]
         mc.append(dict(t=t, ever=int((out.counts[:, 0] > 0).sum()), n=seeds,

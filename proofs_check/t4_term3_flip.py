@@ -28,7 +28,7 @@ def simulate(ctx):
         ctx.note(f"flip runs α0={a0} p={p}")
         res = common.runs_over_horizons(ts, lambda t: fw.alpha_log(a0, p, t), estimator="flip",
                                         means=MEANS, num_seeds=seeds, diagnostics=True,
-                                        flip_q=Q, seed=ctx.root_seed)
+                                        flip_q=Q, seed=ctx.root_seed, share=ctx.quick)
         for t in ts:
             d = res[t].diag
             rows.append(dict(alpha0=a0, p=p, T=t, rb=Q * np.asarray(d.inv_sqrt_best),

@@ -22,7 +22,7 @@ def simulate(ctx):
     for a0 in (0.1, 1.0):
         res = common.runs_over_horizons(ts, lambda t: fw.alpha_log(a0, P, t), estimator="adv",
                                         means=MEANS, num_seeds=seeds, beta=1.0, oracle_eps=EPS,
-                                        seed=ctx.root_seed)
+                                        seed=ctx.root_seed, share=ctx.quick)
         curves[a0] = {t: (np.asarray(res[t].regret_rb_paper) / t, np.asarray(res[t].counts[:, 0]))
                       for t in ts}
     return {"curves": curves, "ts": ts, "seeds": seeds}

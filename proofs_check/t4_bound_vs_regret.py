@@ -37,7 +37,43 @@ def simulate(ctx):
             rows.append(dict(est=est, K=K, beta=beta, d2=d2, alpha0=a0, p=p, T=t,
                              dmax=float(means.max() - means.min()),
                              regret=np.asarray(res[t].regret_rb_paper)))
-    return {"rows": rows, "seeds": g["seeds"]}
+    return {"rows": rows, "seeds": g["seeds"], "curves": bound_curves(g), "tstar": tstar_grid(ctx)}
+
+
+def bound_curves(g):
+    """log10 of B(T), its four terms, the corrected bound and Δ_max·T on a log grid of T, for
+    each configuration (figure data; deterministic)."""
+    log10_t = np.linspace(1.0, 40.0, 400)
+    L = log10_t * th.LN10
+    out = []
+    for est, K, beta, d2, a0, p in g["combos"]:
+        means = common.delta2_means(K, d2)
+        terms = th.thm4_log_terms(L, K, beta, d2, a0, p)
+        out.append(dict(est=est, K=K, beta=beta, d2=d2, alpha0=a0, p=p,
+                        log10_t=log10_t.tolist(),
+                        log10_terms=(terms / th.LN10).T.tolist(),
+                        log10_bound=(th.logsumexp(terms) / th.LN10).tolist(),
+                        log10_corrected=(th.corrected_log_bound(L, K, beta, a0, p) / th.LN10).tolist(),
+                        log10_trivial=(np.log10(means.max() - means.min()) + log10_t).tolist()))
+    return out
+
+
+def tstar_grid(ctx):
+    """log10 T* (first T with B(T) < T) over (K, β, Δ2, α0, p) — the heat-map data."""
+    ks = (2, 10, 64)
+    betas = (0.1, 1.0)
+    d2s = (0.05, 0.2)
+    a0s = (0.1, 0.3, 1.0, 2.0) if ctx.quick else (0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
+    ps = (0.1, 0.2, 0.3) if ctx.quick else (0.05, 0.1, 0.15, 0.2, 0.25, 0.3)
+    vals = np.full((len(ks), len(betas), len(d2s), len(a0s), len(ps)), np.nan)
+    for i, K in enumerate(ks):
+        for j, b in enumerate(betas):
+            for k, d in enumerate(d2s):
+                for m, a0 in enumerate(a0s):
+                    for n, p in enumerate(ps):
+                        vals[i, j, k, m, n] = th.thm4_crossing(K, b, d, a0, p, num_grid=1001)
+    return dict(K=ks, beta=betas, delta2=d2s, alpha0=a0s, p=ps,
+                log10_tstar=np.where(np.isfinite(vals), vals, -1.0).tolist())
 
 
 def evaluate(data, ctx):
@@ -57,7 +93,8 @@ def evaluate(data, ctx):
         fig.append(dict(est=r["est"], K=r["K"], beta=r["beta"], d2=r["d2"], alpha0=r["alpha0"],
                         p=r["p"], T=r["T"], regret=float(r["regret"].mean()),
                         log10_bound=log_b / th.LN10, dmax=r["dmax"]))
-    return fw.finish(CHECK, ctx, cells, seeds=data["seeds"], figure_data={"rows": fig})
+    return fw.finish(CHECK, ctx, cells, seeds=data["seeds"],
+                     figure_data={"rows": fig, "curves": data["curves"], "tstar": data["tstar"]})
 
 
 CHECK = fw.Check(

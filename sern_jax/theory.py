@@ -421,9 +421,7 @@ def crossing_log10_t(
     if neg.size == 0:
         return math.inf
     i = int(neg[0])
-    if i == 0:
-        return float(log10_grid[0])
-    lo, hi = log10_grid[i - 1], log10_grid[i]
+    lo, hi = (log10_grid[i - 1] if i > 0 else 1e-9), log10_grid[i]
     for _ in range(iters):
         mid = 0.5 * (lo + hi)
         if log_gap_fn(np.array(mid * LN10)) < 0:
@@ -433,12 +431,15 @@ def crossing_log10_t(
     return float(hi)
 
 
-def thm4_crossing(num_arms, beta, delta2, alpha0, p, fraction=1.0, d_scale=1.0) -> float:
+def thm4_crossing(
+    num_arms, beta, delta2, alpha0, p, fraction=1.0, d_scale=1.0, num_grid=20001
+) -> float:
     """log10 T* = first T with B(T) < fraction * T (audit §4: fraction=1 gives T*, fraction
-    = Delta2 gives T_Delta)."""
+    = Delta2 gives T_Delta). B(T)/T is decreasing for p < 1/3, so a coarse grid suffices there."""
     lf = math.log(fraction)
     return crossing_log10_t(
-        lambda L: thm4_log_bound(L, num_arms, beta, delta2, alpha0, p, d_scale) - L - lf
+        lambda L: thm4_log_bound(L, num_arms, beta, delta2, alpha0, p, d_scale) - L - lf,
+        num_grid=num_grid,
     )
 
 

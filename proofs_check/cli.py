@@ -84,9 +84,14 @@ def run(args) -> int:
                      progress=lambda msg: bar.set_postfix_str(msg[:60], refresh=True))
     t0 = time.perf_counter()
     results = []
-    for check in bar:
+    tty = sys.stderr.isatty()
+    for i, check in enumerate(bar):
         bar.set_description(check.name)
-        results.append(fw.run_check(check, ctx))
+        res = fw.run_check(check, ctx)
+        results.append(res)
+        if not tty:  # tqdm is silent off a terminal: leave one line per check in the log
+            print(f"[{i + 1}/{len(checks)}] {check.name}: {res.verdict} (expected "
+                  f"{res.expected}) {res.wall_s:.0f} s", file=sys.stderr, flush=True)
     total = time.perf_counter() - t0
     bar.close()
 

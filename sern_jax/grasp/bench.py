@@ -168,7 +168,17 @@ def random_grasps(model, key, n):
 
 
 def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict:
-    """Paired native vs MJX outcomes on the same grasps and noise, per object."""
+    """Paired native vs MJX outcomes on the same grasps and noise, per object.
+
+    Args:
+      objects: object names, mesh paths or ObjectSpecs.
+      trials_per_object: N paired trials each (``random_grasps`` + ``sim.sample_noise``).
+      seed: root seed; object i uses ``fold_in(key(seed), i)`` and resting pose seed i.
+      progress: optional callback(name, stats).
+
+    Returns:
+      dict with per-object stats, the total number of trials and the pooled agreement.
+    """
     import jax
     import numpy as np
 
@@ -178,8 +188,10 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
 
     per_object, agree, total = {}, 0, 0
     root = jax.random.key(seed)
-    for i, name in enumerate(objects):
-        spec = objects_lib.resolve_object(name)
+    for i, obj in enumerate(objects):
+        is_spec = isinstance(obj, objects_lib.ObjectSpec)
+        spec = obj if is_spec else objects_lib.resolve_object(obj)
+        name = spec.name
         model = scene_lib.build_scene(spec, seed=i)
         key = jax.random.fold_in(root, i)
         k_grasp, k_noise = jax.random.split(key)

@@ -34,7 +34,8 @@ Backends, one interface (:class:`GraspSimulator`):
 
 * ``"native"``: MuJoCo C via ``mujoco.rollout`` (multi-threaded); the fast CPU path.
 * ``"mjx"``: MuJoCo MJX, ``jit(vmap(scan(mjx.step)))``; the GPU path. The ``mjx.Model``
-  is an argument, so scenes of the same structure share one compiled program.
+  is an argument, so scenes of the same structure share one compiled program; batches
+  are padded to the next power of two, so each power of two compiles once.
 
 Every :class:`TrialResult` / :class:`SuccessEstimate` records its ``backend``.
 """
@@ -464,13 +465,18 @@ class _MjxRunner:
         if object_pose is not None:
             a = self.ids.object_qpos
             qpos0[:, a : a + 7] = object_pose
+        # Pad the batch to the next power of two (repeating trial 0, results dropped)
+        # so that varying numbers of valid candidates reuse a few compiled programs.
+        n_pad = 1 << max(n - 1, 0).bit_length()
+        pad = np.concatenate([np.arange(n), np.zeros(n_pad - n, np.int64)])
+        noise = TrialNoise(*(a[pad] for a in noise))
         # MJX's own code relies on NumPy rank promotion (mjx/_src/smooth.py), so it is
         # allowed here even when the caller sets jax_numpy_rank_promotion="raise".
         with jax.numpy_rank_promotion("allow"):
-            finite, rise, gap = self._call(qpos0, grasps, noise)
-        nan = ~np.asarray(finite)
-        rise = np.where(nan, np.nan, np.asarray(rise, np.float64))
-        gap = np.asarray(gap, np.float64)
+            finite, rise, gap = self._call(qpos0[pad], grasps[pad], noise)
+        nan = ~np.asarray(finite)[:n]
+        rise = np.where(nan, np.nan, np.asarray(rise, np.float64)[:n])
+        gap = np.asarray(gap, np.float64)[:n]
         success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
         return TrialResult(success, nan, rise, gap, "mjx")
 

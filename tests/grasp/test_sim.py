@@ -116,3 +116,12 @@ def test_backends_agree_over_objects():
     assert result["agreement"] >= 0.9, result
     for stats in result["objects"].values():
         assert stats["nan_native"] == 0 and stats["nan_mjx"] == 0, stats
+
+
+def test_mjx_pads_odd_batches_without_changing_results(mjx_sim, paired_trials):
+    grasps, noise = paired_trials
+    base = mjx_sim.run_trials(grasps, noise)
+    five = mjx_sim.run_trials(grasps[:5], sim.TrialNoise(*(a[:5] for a in noise)))
+    assert five.success.shape == (5,)  # padded to 8: the same compiled program
+    np.testing.assert_array_equal(five.success, base.success[:5])
+    np.testing.assert_allclose(five.rise, base.rise[:5], atol=1e-6)

@@ -25,6 +25,7 @@ capsule = (r, half-length, 0) along the geom's local z; mesh = (0, 0, 0). Quater
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import os
 from pathlib import Path
@@ -457,7 +458,7 @@ def sample_object(
         key = jax.random.key(key)
     u = np.asarray(jax.random.uniform(key, (10,)), dtype=np.float64)
     if tag is None:
-        tag = format(abs(hash(u.tobytes())) % 16**8, "08x")
+        tag = hashlib.sha1(u.tobytes()).hexdigest()[:8]  # stable across processes
     kind = kinds[min(int(u[8] * len(kinds)), len(kinds) - 1)]
     mass = float(math.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * u[9]))
     return _primitive(kind, u, f"{kind}_{tag}", mass)

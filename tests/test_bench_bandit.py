@@ -1,0 +1,39 @@
+"""`sern bench bandit --json` prints one valid JSON object with positive figures."""
+
+import json
+
+import pytest
+
+from sern_jax import cli
+
+
+def test_bench_bandit_json(capsys):
+    code = cli.main(["bench", "bandit", "--json", "--seeds", "64", "--horizon", "200",
+                     "--numpy-seeds", "64", "--repeats", "1"])
+    assert code == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1
+    result = json.loads(out[0])
+    for field in ("seed_rounds_per_s", "compile_s", "peak_rss_mb", "numpy_seed_rounds_per_s",
+                  "speedup_vs_numpy", "fast_seed_rounds_per_s", "general_seed_rounds_per_s"):
+        assert isinstance(result[field], (int, float)) and result[field] > 0, field
+    assert result["numpy_seeds"] == 64
+    assert result["repeats"] == 1
+    assert result["jax_version"]
+    assert result["device"]["backend"]
+    assert result["engine_path"]
+    agree = result["regret_agreement"]
+    assert agree["fast_mean_regret_T"] > 0 and agree["numpy_mean_regret_T"] > 0
+    # same random streams: the fast path and the general runner draw the same arms
+    assert agree["fast_general_counts_identical_fraction"] >= 0.9
+    # different streams (NumPy vs JAX), same workload: means agree within a few SE
+    assert abs(agree["z_fast_vs_numpy"]) < 6
+
+
+@pytest.mark.parametrize("argv,match", [(["--arms", "1"], "arms"),
+                                         (["--alpha", "0"], "alpha"),
+                                         (["--alpha", "0.001"], "alpha"),
+                                         (["--numpy-seeds", "1"], "numpy-seeds")])
+def test_bench_bandit_bad_input(argv, match, capsys):
+    assert cli.main(["bench", "bandit", "--json", *argv]) == 2
+    assert match in capsys.readouterr().err

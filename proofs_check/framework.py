@@ -165,8 +165,16 @@ def exact_cell(label, statistic, bound, direction="ge", vacuous=False, **kw) -> 
     return Cell(label, s, b, direction, exact=True, violated=violated, vacuous=vacuous, **kw)
 
 
-def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False, **kw) -> Cell:
-    """CLT test of E[X] <= bound ('le') or >= bound ('ge') from per-seed values [S]."""
+def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False,
+              value_range=None, **kw) -> Cell:
+    """CLT test of E[X] <= bound ('le') or >= bound ('ge') from per-seed values [S].
+
+    ``value_range=(lo, hi)``: the values' a-priori range. When every seed gives the same value
+    v the CLT has no variance to work with; then (if the range is known) the test is exact:
+    if a fraction q of the population differs from v, all S seeds equal v with probability
+    (1-q)^S, and a difference moves the mean by at most (hi - v) or (v - lo). Without a range
+    the statistic is treated as deterministic (e.g. an exact oracle).
+    """
     from sern_jax import stats
 
     x = np.asarray(values, dtype=np.float64).ravel()
@@ -175,8 +183,25 @@ def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False, *
     p = stats.mean_pvalue(ci.mean, ci.se, float(bound), direction)
     one = stats.mean_ci(x, 1.0 - alpha, side=side)
     lo, hi = (one.lower, ci.upper) if direction == "le" else (ci.lower, one.upper)
+    note_extra = ""
+    if ci.se == 0.0 and value_range is not None:
+        v, n, b = ci.mean, x.size, float(bound)
+        q_alpha = 1.0 - alpha ** (1.0 / n)  # largest q with (1-q)^n >= alpha
+        room = (value_range[1] - v) if direction == "ge" else (v - value_range[0])
+        lo, hi = ((v - q_alpha * room, v + q_alpha * (value_range[1] - v)) if direction == "le"
+                  else (v - q_alpha * (v - value_range[0]), v + q_alpha * room))
+        gap = (b - v) if direction == "ge" else (v - b)
+        if gap <= 0:
+            p = 1.0
+        elif room <= 0:
+            p = 0.0
+        else:
+            p = float((1.0 - min(1.0, gap / room)) ** n)
+        note_extra = "all seeds equal: exact zero-variance test"
     exc = stats.mean_detectable_excess(ci.se, alpha)
     det = float(bound) + exc if direction == "le" else float(bound) - exc
+    if note_extra:
+        kw["note"] = (kw.get("note", "") + "; " + note_extra).lstrip("; ")
     return Cell(label, ci.mean, float(bound), direction, lower=lo, upper=hi, pvalue=p,
                 detectable=det, vacuous=vacuous, **kw)
 

@@ -23,7 +23,7 @@ def evaluate(data, ctx):
                 continue
             cells.append(fw.mean_cell(f"{est} K={K} α={alpha:g} t={t} arm {arm}: E N_a(t)",
                                       out.counts[:, g, arm], c * t, "ge", ctx.alpha,
-                                      vacuous=c * t < 1.0))
+                                      vacuous=c * t < 1.0, value_range=(0.0, float(t))))
     return fw.finish(CHECK, ctx, cells, seeds=data["grid"]["seeds"],
                      notes="the tested arm is the least-pulled one at T (chosen after the "
                            "fact, which can only favour a FAIL)")

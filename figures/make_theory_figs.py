@@ -118,7 +118,8 @@ def fig_tstar(data, out, written):
     v = np.where(v < 0, np.nan, v)
     for k, d2 in enumerate(g["delta2"]):
         fig, axes = plt.subplots(len(g["beta"]), len(g["K"]),
-                                 figsize=(4.2 * len(g["K"]), 3.6 * len(g["beta"])), squeeze=False)
+                                 figsize=(4.2 * len(g["K"]), 3.6 * len(g["beta"])), squeeze=False,
+                                 constrained_layout=True)
         for i, K in enumerate(g["K"]):
             for j, b in enumerate(g["beta"]):
                 ax = axes[j][i]
@@ -134,9 +135,12 @@ def fig_tstar(data, out, written):
                 ax.set_xticks(range(len(g["p"])), [f"{p:g}" for p in g["p"]])
                 ax.set_yticks(range(len(g["alpha0"])), [f"{a:g}" for a in g["alpha0"]])
                 ax.set_xlabel("p")
-                ax.set_ylabel("α0 (hatched: α0 < 1, c unjustified)")
+                if i == 0:
+                    ax.set_ylabel("α0")
                 ax.set_title(f"log10 T*: K={K} β={b:g} Δ2={d2:g}", fontsize=9)
         fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="log10 T* (B(T) < T)")
+        fig.suptitle("Theorem 4: first T with B(T) < T (hatched rows: α0 < 1, where Theorem 4's "
+                     "c is not justified by Theorem 1)", fontsize=10)
         fig.savefig(out / f"tstar_heatmap_d2_{d2:g}.png", dpi=110)
         written.append(out / f"tstar_heatmap_d2_{d2:g}.png")
         plt.close(fig)

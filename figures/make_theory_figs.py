@@ -148,19 +148,23 @@ def fig_tstar(data, out, written):
 
 def fig_alpha0(fd, out, written):
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.5, 4.3))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.3))
     small = fd.get("t5_alpha0_small", {}).get("curves", {})
     for a0, c in small.items():
-        ax.plot(c["ts"], c["ratio"], "o-", label=f"r=(1,0.9), adv β=1, α0={float(a0):g} "
+        ax.plot(c["ts"], c["ratio"], "o-", label=f"α0={float(a0):g} "
                 f"({'<' if float(a0) < 0.267 else '>'} p·g = 0.267)")
+    ax.set_title("r = (1, 0.9), adv oracle β = 1, p = 0.3")
     for c in fd.get("t5_ratio_decreasing", {}).get("curves", []):
-        ax.plot(c["ts"], c["ratio"], ".--", lw=0.8,
-                label=f"{c['est']} p={c['p']:g} Δ={c['delta']:g}, α0=1")
-    ax.set_xscale("log")
-    ax.set_xlabel("T (separate run per T)")
-    ax.set_ylabel("R_T / T")
-    ax.set_title("Theorem 5: α0 below vs above p·g")
-    ax.legend(fontsize=6)
+        if c["est"] not in ("exact", "addhalf"):
+            continue
+        ax2.plot(c["ts"], c["ratio"], "o-" if c["est"] == "exact" else "s:", lw=1,
+                 label=f"{c['est']} p={c['p']:g} Δ={c['delta']:g}")
+    ax2.set_title("Algorithm 1 (α0 = 1), K = 2: exact oracle and add-half mean")
+    for a in (ax, ax2):
+        a.set_xscale("log")
+        a.set_xlabel("T (separate run per T)")
+        a.set_ylabel("R_T / T")
+        a.legend(fontsize=6)
     _save(fig, out / "ratio_vs_T_alpha0.png", written)
 
 

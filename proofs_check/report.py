@@ -54,10 +54,18 @@ def build_json(results, args, total_s, command) -> dict:
     }
 
 
+def _machine(meta: dict) -> str:
+    host = meta.get("host", {})
+    jx = meta.get("jax", {})
+    ver = meta.get("versions", {}).get("jax", "?")
+    return (f"{host.get('machine', '?')} {host.get('cpu_count', '?')} CPUs, jax {ver} on "
+            f"{jx.get('backend', '?')} {jx.get('devices', '')}")
+
+
 def build_markdown(results, doc) -> str:
     md = ["# sern check report", "",
           f"Command: `{doc['command']}`  ",
-          f"Wall time: {doc['wall_s']:.0f} s; machine: {doc['metadata'].get('platform', '?')}; "
+          f"Wall time: {doc['wall_s']:.0f} s; machine: {_machine(doc['metadata'])}; "
           f"git {doc['metadata'].get('git_commit', '?')}  ",
           f"All verdicts as expected: **{doc['all_as_expected']}**", "",
           "Verdicts: PASS (no cell rejected the claim, with power), FAIL (rejected: Holm at "

@@ -29,6 +29,7 @@ NAMES = (
     # Theorem 5 and Algorithm 1
     "t5_ratio_decreasing",
     "t5_alpha0_small",
+    "t5_worst_case_rate",
     "alg1_l1_median",
 )
 

@@ -11,7 +11,6 @@ import argparse
 import datetime as _dt
 import sys
 import time
-from pathlib import Path
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
 from proofs_check import common
 from proofs_check import framework as fw
 from sern_jax import theory as th

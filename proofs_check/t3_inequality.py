@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 
 from proofs_check import common
 from proofs_check import framework as fw

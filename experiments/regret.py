@@ -152,7 +152,8 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
                 if path.exists():
                     bar.update(size)
                     continue
-                out = _run_chunk(cfg, params, exp.seed, c * chunk, size, chunk, mesh)
+                out = sim.run_seeds(cfg, params, exp.seed, size, first_seed=c * chunk,
+                                    chunk_size=chunk, mesh=mesh)
                 io.save_npz(path, **{f: getattr(out, f) for f in FIELDS})
                 ran = True
                 bar.update(size)
@@ -173,24 +174,6 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
         io.save_json(run_dir / "summary.json", summary)
         _write_report(run_dir, exp, summary, meta)
     return run_dir
-
-
-def _run_chunk(cfg, params, seed, start, size, chunk, mesh):
-    """Seeds [start, start+size) with a fixed compiled chunk shape."""
-    import jax
-
-    from sern_jax import simulate as sim
-
-    fn = sim._jitted_runner(cfg, mesh)
-    n = chunk
-    if mesh is not None:
-        n = math.ceil(chunk / mesh.devices.size) * mesh.devices.size
-    keys = sim.seed_keys(jax.random.key(seed), n, start)
-    if mesh is not None:
-        keys = jax.device_put(keys, jax.sharding.NamedSharding(
-            mesh, jax.sharding.PartitionSpec(mesh.axis_names[0])))
-    out = fn(keys, params)
-    return jax.tree.map(lambda x: np.asarray(x)[:size], out)
 
 
 def fit_slope(t: np.ndarray, curves: np.ndarray, t_min: float, num_boot: int = 200,

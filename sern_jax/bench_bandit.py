@@ -24,12 +24,13 @@ import argparse
 import json
 import os
 import platform
-import resource
 import statistics
 import sys
 import time
 
 import numpy as np
+
+from sern_jax import io
 
 __all__ = ["add_parser", "run", "numpy_reference"]
 
@@ -298,7 +299,7 @@ def run(args) -> int:
                                      if numpy_rate and general_rate else None),
         "repeats": args.repeats,
         "general_repeats": args.general_repeats,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "peak_rss_mb": io.peak_rss_mb(),
         "machine": {"cpu": _cpu_model(), "cpu_count": os.cpu_count(),
                     "platform": platform.platform(), "python": platform.python_version(),
                     "loadavg_before": [round(x, 2) for x in load_before],

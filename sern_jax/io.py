@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "peak_rss_mb",
     "make_run_dir",
     "save_json",
     "load_json",
@@ -102,6 +103,28 @@ def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
 def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     with np.load(path, allow_pickle=False) as data:
         return {k: data[k] for k in data.files}
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MiB.
+
+    Reads ``VmHWM`` from ``/proc/self/status`` on Linux: ``getrusage``'s ``ru_maxrss`` would
+    carry a parent's larger peak over ``fork``/``exec`` (a benchmark started from a big process
+    would report the parent's memory). Elsewhere falls back to ``ru_maxrss`` (bytes on macOS,
+    KiB on other systems).
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+    import sys
+
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024.0
 
 
 def _git_commit() -> str | None:

@@ -41,6 +41,11 @@ __all__ = [
     "make_run",
     "seed_keys",
     "run_seeds",
+    "plan_run",
+    "RunPlan",
+    "RUNNERS",
+    "bytes_per_seed",
+    "default_chunk_size",
     "validate",
 ]
 
@@ -371,63 +376,166 @@ def seed_keys(root: Key, num_seeds: int, start: int = 0) -> Array:
         jnp.arange(start, start + num_seeds, dtype=jnp.uint32))
 
 
+RUNNERS = ("auto", "fast", "general")
+# Bytes of outputs and per-seed state one jitted call may hold on the host backend: seeds run in
+# calls of this size (one compilation), results are written into preallocated arrays, so peak
+# memory is the final O(S·G·K) outputs plus one call's worth, whatever S is.
+_CPU_CALL_BYTES = 64 * 2**20
+_ACCEL_CALL_BYTES = 2 * 2**30
+
+
+class RunPlan(NamedTuple):
+    """How :func:`run_seeds` executes: the jitted batched runner and its fixed call shape.
+
+    Attributes:
+      fn: ``fn(keys [chunk], params) -> RunOutput`` (jitted; one compilation per plan).
+      fast: whether ``fn`` is :mod:`sern_jax.fast_softmax`'s runner.
+      chunk: seeds per call (a multiple of the mesh size; the last call is padded).
+      inner: seeds per ``lax.map`` step inside a fast call (None: one step).
+    """
+
+    fn: Callable
+    fast: bool
+    chunk: int
+    inner: Optional[int]
+
+
+def bytes_per_seed(config: RunConfig) -> int:
+    """Host bytes one seed's outputs and scan state take (an upper estimate)."""
+    g = checkpoint_times(config).size
+    item = 8 if config.dtype == "float64" else 4
+    k, m = config.num_arms, config.num_contexts
+    num_diag = len(Diagnostics._fields) if config.diagnostics else 0
+    outputs = g * (k * (4 + item) + (5 + num_diag) * item)
+    state = (4 * m * k + 16 * k + 64) * item
+    return outputs + state
+
+
+def default_chunk_size(config: RunConfig, num_seeds: int, backend: str | None = None) -> int:
+    """Seeds per jitted call when ``chunk_size`` is not given: all of them unless one call
+    would hold more than 64 MiB of outputs and state on CPU (2 GiB on an accelerator)."""
+    backend = jax.default_backend() if backend is None else backend
+    budget = _CPU_CALL_BYTES if backend == "cpu" else _ACCEL_CALL_BYTES
+    return max(1, min(num_seeds, budget // bytes_per_seed(config)))
+
+
+def plan_run(
+    config: RunConfig,
+    params: RunParams,
+    num_seeds: int,
+    *,
+    mesh: "jax.sharding.Mesh | None" = None,
+    chunk_size: int | None = None,
+    runner: str = "auto",
+) -> RunPlan:
+    """Chooses the runner and call shape for :func:`run_seeds` (host-side; compiles nothing).
+
+    ``runner="auto"`` takes :mod:`sern_jax.fast_softmax` whenever it reproduces
+    :func:`make_run` (SERN softmax, one context, a local estimator, no diagnostics, α large
+    enough for its float type; see ``fast_softmax.supports``) and the general runner otherwise;
+    ``"fast"`` insists on the fast runner (``ValueError`` if unsupported), ``"general"`` on
+    :func:`make_run`.
+    """
+    from sern_jax import fast_softmax  # fast_softmax imports this module
+
+    if runner not in RUNNERS:
+        raise ValueError(f"unknown runner {runner!r}; expected one of {RUNNERS}")
+    if chunk_size is not None and (isinstance(chunk_size, bool) or int(chunk_size) < 1):
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    supported = runner != "general" and fast_softmax.supports(config, params)
+    if runner == "fast" and not supported:
+        raise ValueError(
+            f"runner='fast' needs policy='softmax', one context, an estimator in "
+            f"{est_lib.LOCAL_ESTIMATORS}, diagnostics=False and alpha >= "
+            f"{fast_softmax.min_alpha(config.dtype)} ({config.dtype}); got policy="
+            f"{config.policy!r}, estimator={config.estimator!r}, "
+            f"num_contexts={config.num_contexts}, diagnostics={config.diagnostics}")
+    chunk = default_chunk_size(config, num_seeds) if chunk_size is None else int(chunk_size)
+    n_dev = 1 if mesh is None else mesh.devices.size
+    if supported:
+        target = fast_softmax.DEFAULT_CPU_CHUNK if jax.default_backend() == "cpu" else None
+        inner, chunk = fast_softmax.chunk_layout(chunk, target, n_dev)
+        if inner * n_dev >= chunk:
+            inner = None
+    else:
+        inner = None
+        chunk = int(math.ceil(chunk / n_dev) * n_dev)
+    return RunPlan(_jitted_runner(config, mesh, supported, inner), supported, chunk, inner)
+
+
 def run_seeds(
     config: RunConfig,
     params: RunParams,
     seed: int = 0,
     num_seeds: int = 1000,
     *,
+    first_seed: int = 0,
     mesh: "jax.sharding.Mesh | None" = None,
     chunk_size: int | None = None,
+    runner: str = "auto",
     progress: Callable[[int], None] | None = None,
 ) -> RunOutput:
-    """Runs ``num_seeds`` seeds; outputs have a leading [S] axis (numpy arrays).
+    """Runs seeds ``first_seed … first_seed + num_seeds − 1``; outputs have a leading [S] axis.
 
     Args:
       config: static configuration.
       params: traced parameters shared by all seeds.
       seed: root seed; seed ``i`` uses ``fold_in(key(seed), i)``.
       num_seeds: S ≥ 1.
+      first_seed: index of the first seed (runs split into pieces give the same results).
       mesh: optional ``jax.sharding.Mesh`` with one axis: the seed axis is sharded over it.
         Results equal the single-device run.
-      chunk_size: seeds per jitted call (bounds memory; all chunks reuse one compilation).
-      progress: called with the number of seeds finished after each chunk.
+      chunk_size: seeds per jitted call. Every call has this shape (the last one is padded), so
+        runs of any ``num_seeds`` with the same ``chunk_size`` share one compilation. Default:
+        :func:`default_chunk_size` (bounds memory).
+      runner: ``"auto"`` (fast runner where it is exact), ``"fast"`` or ``"general"``; see
+        :func:`plan_run`.
+      progress: called with the number of seeds finished after each call.
 
     Returns:
       :class:`RunOutput` of numpy arrays with leading axis S.
     """
     validate(config, params, num_seeds)
-    fn = _jitted_runner(config, mesh)
+    if isinstance(first_seed, bool) or int(first_seed) < 0:
+        raise ValueError(f"first_seed must be a non-negative integer, got {first_seed!r}")
+    plan = plan_run(config, params, num_seeds, mesh=mesh, chunk_size=chunk_size, runner=runner)
     root = jax.random.key(seed)
-    chunk = num_seeds if chunk_size is None else max(1, min(chunk_size, num_seeds))
+    sharding = None
     if mesh is not None:
-        n_dev = mesh.devices.size
-        chunk = int(math.ceil(chunk / n_dev) * n_dev)
-    outs = []
-    for start in range(0, num_seeds, chunk):
-        size = min(chunk, num_seeds - start)
-        keys = seed_keys(root, chunk, start)  # fixed chunk shape: one compilation
-        if mesh is not None:
-            sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(mesh.axis_names[0]))
+        sharding = jax.sharding.NamedSharding(
+            mesh, jax.sharding.PartitionSpec(mesh.axis_names[0]))
+    result = None
+    for start in range(0, num_seeds, plan.chunk):
+        size = min(plan.chunk, num_seeds - start)
+        keys = seed_keys(root, plan.chunk, int(first_seed) + start)  # fixed call shape
+        if sharding is not None:
             keys = jax.device_put(keys, sharding)
-        out = jax.tree.map(lambda x: np.asarray(x)[:size], fn(keys, params))
-        outs.append(out)
+        out = jax.tree.map(lambda x: np.asarray(x)[:size], plan.fn(keys, params))
+        if result is None:
+            result = jax.tree.map(
+                lambda x: np.empty((num_seeds,) + x.shape[1:], x.dtype), out)
+        for dst, src in zip(jax.tree.leaves(result), jax.tree.leaves(out)):
+            dst[start:start + size] = src
+        del out
         if progress is not None:
             progress(start + size)
-    if len(outs) == 1:
-        return outs[0]
-    return jax.tree.map(lambda *xs: np.concatenate(xs, axis=0), *outs)
+    return result
 
 
 _RUNNERS: dict = {}
 
 
-def _jitted_runner(config: RunConfig, mesh):
-    cache_key = (config, None if mesh is None else (tuple(mesh.axis_names), mesh.devices.shape,
-                                                    tuple(d.id for d in mesh.devices.flat)))
+def _jitted_runner(config: RunConfig, mesh, fast: bool = False, inner: int | None = None):
+    mesh_key = None if mesh is None else (tuple(mesh.axis_names), mesh.devices.shape,
+                                          tuple(d.id for d in mesh.devices.flat))
+    cache_key = (config, mesh_key, fast, inner)
     if cache_key not in _RUNNERS:
-        run = make_run(config)
-        batched = jax.vmap(run, in_axes=(0, None))
+        if fast:
+            from sern_jax import fast_softmax
+
+            batched = fast_softmax.make_batched(config, chunk=inner, mesh=mesh)
+        else:
+            batched = jax.vmap(make_run(config), in_axes=(0, None))
         if mesh is None:
             _RUNNERS[cache_key] = jax.jit(batched)
         else:

@@ -1,5 +1,6 @@
 """The runner: closed-form regret, seed conventions, no recompiles, sharding, bad input."""
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -88,11 +89,15 @@ def test_chunked_equals_unchunked(thousand_seeds):
 def test_no_recompile_when_alpha_changes():
     cfg = sim.RunConfig(num_arms=4, horizon=50, num_checkpoints=5)
     prob = problems.bernoulli([0.2, 0.4, 0.6, 0.8])
-    fn = sim._jitted_runner(cfg, None)
-    a = sim.run_seeds(cfg, sim.default_params(cfg, prob, alpha0=0.05), num_seeds=64)
-    b = sim.run_seeds(cfg, sim.default_params(cfg, prob, alpha0=2.0), num_seeds=64)
-    assert fn._cache_size() == 1
-    assert not np.array_equal(a.counts, b.counts)
+    for runner in ("general", "fast"):
+        lo, hi = (sim.default_params(cfg, prob, alpha0=a) for a in (0.1, 2.0))
+        fn = sim.plan_run(cfg, lo, 64, runner=runner).fn
+        a = sim.run_seeds(cfg, lo, num_seeds=64, runner=runner)
+        b = sim.run_seeds(cfg, hi, num_seeds=64, runner=runner)
+        c = sim.run_seeds(cfg, lo, num_seeds=10, runner=runner, chunk_size=64)
+        assert fn._cache_size() == 1, runner
+        assert not np.array_equal(a.counts, b.counts)
+        np.testing.assert_array_equal(c.counts, a.counts[:10])
     # a vmapped α sweep is one program too
     run = sim.make_run(cfg)
     params = sim.default_params(cfg, prob)
@@ -105,6 +110,47 @@ def test_no_recompile_when_alpha_changes():
         assert out.regret.shape == (3, 32, 5)
     assert sweep_fn._cache_size() == 1
     del sweep
+
+
+def test_run_seeds_dispatches_to_the_exact_fast_runner():
+    # auto takes fast_softmax exactly where it reproduces make_run, and the general runner
+    # elsewhere (diagnostics, other policies, α below the fast runner's float32 floor).
+    params = sim.default_params(CFG, PROB, alpha0=0.1)
+    assert sim.plan_run(CFG, params, 10).fast
+    assert not sim.plan_run(CFG, params, 10, runner="general").fast
+    diag_cfg = dataclasses.replace(CFG, diagnostics=True)
+    assert not sim.plan_run(diag_cfg, params, 10).fast
+    tiny = sim.default_params(CFG, PROB, alpha0=0.005)
+    assert not sim.plan_run(CFG, tiny, 10).fast
+    assert np.isfinite(sim.run_seeds(CFG, tiny, num_seeds=8).regret_rb).all()
+    with pytest.raises(ValueError, match="runner='fast'"):
+        sim.plan_run(dataclasses.replace(CFG, policy="ucb1"), params, 10, runner="fast")
+    with pytest.raises(ValueError, match="unknown runner 'quick'"):
+        sim.run_seeds(CFG, params, num_seeds=4, runner="quick")
+    with pytest.raises(ValueError, match="chunk_size must be a positive integer, got 0"):
+        sim.run_seeds(CFG, params, num_seeds=4, chunk_size=0)
+    with pytest.raises(ValueError, match="first_seed"):
+        sim.run_seeds(CFG, params, num_seeds=4, first_seed=-1)
+
+
+def test_fast_and_general_runners_agree_through_run_seeds_float64():
+    with jax.enable_x64():
+        cfg = dataclasses.replace(CFG, dtype="float64")
+        params = sim.default_params(cfg, problems.bernoulli(PROB.means[0], dtype=jnp.float64),
+                                    alpha0=0.1)
+        fast = sim.run_seeds(cfg, params, seed=3, num_seeds=64, runner="fast")
+        general = sim.run_seeds(cfg, params, seed=3, num_seeds=64, runner="general")
+    np.testing.assert_array_equal(fast.counts, general.counts)
+    np.testing.assert_allclose(fast.regret_rb, general.regret_rb, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fast.compensator, general.compensator, rtol=1e-9, atol=1e-9)
+
+
+def test_default_chunk_size_bounds_one_call():
+    big = sim.RunConfig(num_arms=64, horizon=100_000, num_checkpoints=40)
+    per_call = sim.default_chunk_size(big, 10_000, backend="cpu") * sim.bytes_per_seed(big)
+    assert per_call <= 64 * 2**20
+    assert sim.default_chunk_size(big, 10_000, backend="gpu") == 10_000
+    assert sim.default_chunk_size(CFG, 7, backend="cpu") == 7
 
 
 def test_policies_and_estimators_run_finite():
@@ -225,14 +271,17 @@ def test_diagnostics_exact_oracle_identities():
 
 
 MEM_SCRIPT = textwrap.dedent("""
-    import json, resource, sys
+    import json, sys
     from sern_jax import problems, simulate as sim
     horizon = int(sys.argv[1])
     cfg = sim.RunConfig(num_arms=64, horizon=horizon, num_checkpoints=40, random_means=True)
     params = sim.default_params(cfg, problems.bernoulli([0.5] * 64), alpha0=0.05)
     out = sim.run_seeds(cfg, params, num_seeds=10_000)
     assert out.counts.shape == (10_000, sim.checkpoint_times(cfg).size, 64)
-    print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+    # VmHWM, not getrusage's ru_maxrss: the latter carries the parent's peak over fork/exec
+    # (pytest's own ~2 GB after the other tests), VmHWM belongs to this process's memory only.
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0]
+    print(json.dumps({"peak_rss_mb": int(hwm.split()[1]) / 1024}))
 """)
 
 

@@ -141,6 +141,9 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             mesh = seed_mesh(exp.devices)
         chunk = min(exp.chunk_size, exp.num_seeds)
         num_chunks = math.ceil(exp.num_seeds / chunk)
+        # one fixed call shape for every saved chunk (the last, smaller one too), split so that
+        # each core runs its own calls
+        per_call = math.ceil(chunk / sim.concurrent_calls(mesh))
         bar = _progress_bar(len(triples) * exp.num_seeds, progress)
         timings = {}
         for policy, cfg, params in triples:
@@ -153,7 +156,7 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
                     bar.update(size)
                     continue
                 out = sim.run_seeds(cfg, params, exp.seed, size, first_seed=c * chunk,
-                                    chunk_size=chunk, mesh=mesh)
+                                    chunk_size=per_call, mesh=mesh)
                 io.save_npz(path, **{f: getattr(out, f) for f in FIELDS})
                 ran = True
                 bar.update(size)

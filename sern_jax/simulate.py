@@ -15,8 +15,10 @@ therefore see the same contexts and the same reward uniforms (common random numb
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import math
+import os
 from typing import Callable, NamedTuple, Optional
 
 import jax
@@ -46,6 +48,8 @@ __all__ = [
     "RUNNERS",
     "bytes_per_seed",
     "default_chunk_size",
+    "host_workers",
+    "concurrent_calls",
     "validate",
 ]
 
@@ -392,12 +396,16 @@ class RunPlan(NamedTuple):
       fast: whether ``fn`` is :mod:`sern_jax.fast_softmax`'s runner.
       chunk: seeds per call (a multiple of the mesh size; the last call is padded).
       inner: seeds per ``lax.map`` step inside a fast call (None: one step).
+      workers: calls run at once from host threads (CPU without a mesh: one per core; a
+        compiled call runs on one core at a time there, so this is where the second core's
+        speed comes from).
     """
 
     fn: Callable
     fast: bool
     chunk: int
     inner: Optional[int]
+    workers: int
 
 
 def bytes_per_seed(config: RunConfig) -> int:
@@ -411,12 +419,29 @@ def bytes_per_seed(config: RunConfig) -> int:
     return outputs + state
 
 
-def default_chunk_size(config: RunConfig, num_seeds: int, backend: str | None = None) -> int:
-    """Seeds per jitted call when ``chunk_size`` is not given: all of them unless one call
-    would hold more than 64 MiB of outputs and state on CPU (2 GiB on an accelerator)."""
+def host_workers() -> int:
+    """CPU cores this process may use (its affinity mask where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+def concurrent_calls(mesh: "jax.sharding.Mesh | None" = None) -> int:
+    """How many jitted calls :func:`run_seeds` runs at once: one per core on the CPU backend
+    without a mesh (there a call runs on one core), otherwise 1 (the device is busy already)."""
+    return host_workers() if mesh is None and jax.default_backend() == "cpu" else 1
+
+
+def default_chunk_size(config: RunConfig, num_seeds: int, backend: str | None = None,
+                       workers: int = 1) -> int:
+    """Seeds per jitted call when ``chunk_size`` is not given: an equal share of the seeds for
+    each of ``workers`` concurrent calls, capped so that one call holds at most 64 MiB of
+    outputs and state on CPU (2 GiB on an accelerator)."""
     backend = jax.default_backend() if backend is None else backend
     budget = _CPU_CALL_BYTES if backend == "cpu" else _ACCEL_CALL_BYTES
-    return max(1, min(num_seeds, budget // bytes_per_seed(config)))
+    share = -(-num_seeds // max(1, workers))
+    return max(1, min(share, budget // bytes_per_seed(config)))
 
 
 def plan_run(
@@ -450,7 +475,9 @@ def plan_run(
             f"{fast_softmax.min_alpha(config.dtype)} ({config.dtype}); got policy="
             f"{config.policy!r}, estimator={config.estimator!r}, "
             f"num_contexts={config.num_contexts}, diagnostics={config.diagnostics}")
-    chunk = default_chunk_size(config, num_seeds) if chunk_size is None else int(chunk_size)
+    workers = concurrent_calls(mesh)
+    chunk = (default_chunk_size(config, num_seeds, workers=workers) if chunk_size is None
+             else int(chunk_size))
     n_dev = 1 if mesh is None else mesh.devices.size
     if supported:
         target = fast_softmax.DEFAULT_CPU_CHUNK if jax.default_backend() == "cpu" else None
@@ -460,7 +487,9 @@ def plan_run(
     else:
         inner = None
         chunk = int(math.ceil(chunk / n_dev) * n_dev)
-    return RunPlan(_jitted_runner(config, mesh, supported, inner), supported, chunk, inner)
+    workers = max(1, min(workers, -(-num_seeds // chunk)))
+    return RunPlan(_jitted_runner(config, mesh, supported, inner), supported, chunk, inner,
+                   workers)
 
 
 def run_seeds(
@@ -504,21 +533,45 @@ def run_seeds(
     if mesh is not None:
         sharding = jax.sharding.NamedSharding(
             mesh, jax.sharding.PartitionSpec(mesh.axis_names[0]))
-    result = None
-    for start in range(0, num_seeds, plan.chunk):
-        size = min(plan.chunk, num_seeds - start)
+
+    key_struct = jax.ShapeDtypeStruct((plan.chunk,), root.dtype)
+    fn = plan.fn
+    if plan.workers > 1:
+        # Compiled here, once: worker threads do not inherit thread-local configuration such as
+        # ``jax.enable_x64()``, so they must not trace. (Shares ``plan.fn``'s compilation cache.)
+        fn = plan.fn.lower(key_struct, params).compile()
+
+    def call(start: int):
         keys = seed_keys(root, plan.chunk, int(first_seed) + start)  # fixed call shape
         if sharding is not None:
             keys = jax.device_put(keys, sharding)
-        out = jax.tree.map(lambda x: np.asarray(x)[:size], plan.fn(keys, params))
-        if result is None:
-            result = jax.tree.map(
-                lambda x: np.empty((num_seeds,) + x.shape[1:], x.dtype), out)
+        size = min(plan.chunk, num_seeds - start)
+        out = fn(keys, params)
         for dst, src in zip(jax.tree.leaves(result), jax.tree.leaves(out)):
-            dst[start:start + size] = src
-        del out
-        if progress is not None:
-            progress(start + size)
+            dst[start:start + size] = np.asarray(src)[:size]
+        return size
+
+    shapes = jax.eval_shape(plan.fn, key_struct, params)
+    result = jax.tree.map(lambda x: np.empty((num_seeds,) + x.shape[1:], x.dtype), shapes)
+    starts = range(0, num_seeds, plan.chunk)
+    done = 0
+    if plan.workers == 1:
+        for start in starts:
+            done += call(start)
+            if progress is not None:
+                progress(done)
+        return result
+    with concurrent.futures.ThreadPoolExecutor(plan.workers) as pool:
+        pending = [pool.submit(call, start) for start in starts]
+        try:
+            for future in concurrent.futures.as_completed(pending):
+                done += future.result()
+                if progress is not None:
+                    progress(done)
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            raise
     return result
 
 

@@ -15,7 +15,8 @@ def test_bench_bandit_json(capsys):
     assert len(out) == 1
     result = json.loads(out[0])
     for field in ("seed_rounds_per_s", "compile_s", "peak_rss_mb", "numpy_seed_rounds_per_s",
-                  "speedup_vs_numpy", "fast_seed_rounds_per_s", "general_seed_rounds_per_s"):
+                  "speedup_vs_numpy", "fast_seed_rounds_per_s", "general_seed_rounds_per_s",
+                  "run_seeds_seed_rounds_per_s", "run_seeds_concurrent_calls"):
         assert isinstance(result[field], (int, float)) and result[field] > 0, field
     assert result["numpy_seeds"] == 64
     assert result["repeats"] == 1
@@ -26,6 +27,9 @@ def test_bench_bandit_json(capsys):
     assert agree["fast_mean_regret_T"] > 0 and agree["numpy_mean_regret_T"] > 0
     # same random streams: the fast path and the general runner draw the same arms
     assert agree["fast_general_counts_identical_fraction"] >= 0.9
+    # the public entry point ran the fast runner on the same seeds
+    assert result["run_seeds"]["fast"] and agree["run_seeds_counts_equal_fast"]
+    assert result[result["best_path"]]["seed_rounds_per_s"] == result["seed_rounds_per_s"]
     # different streams (NumPy vs JAX), same workload: means agree within a few SE
     assert abs(agree["z_fast_vs_numpy"]) < 6
 

@@ -19,6 +19,7 @@ import concurrent.futures
 import dataclasses
 import math
 import os
+import threading
 from typing import Callable, NamedTuple, Optional
 
 import jax
@@ -385,7 +386,7 @@ RUNNERS = ("auto", "fast", "general")
 # calls of this size (one compilation), results are written into preallocated arrays, so peak
 # memory is the final O(S·G·K) outputs plus one call's worth, whatever S is.
 _CPU_CALL_BYTES = 64 * 2**20
-_ACCEL_CALL_BYTES = 2 * 2**30
+_ACCEL_CALL_BYTES = 4 * 2**30
 
 
 class RunPlan(NamedTuple):
@@ -437,11 +438,13 @@ def default_chunk_size(config: RunConfig, num_seeds: int, backend: str | None = 
                        workers: int = 1) -> int:
     """Seeds per jitted call when ``chunk_size`` is not given: an equal share of the seeds for
     each of ``workers`` concurrent calls, capped so that one call holds at most 64 MiB of
-    outputs and state on CPU (2 GiB on an accelerator)."""
+    outputs and state on CPU (4 GiB on an accelerator); calls are balanced."""
     backend = jax.default_backend() if backend is None else backend
     budget = _CPU_CALL_BYTES if backend == "cpu" else _ACCEL_CALL_BYTES
     share = -(-num_seeds // max(1, workers))
-    return max(1, min(share, budget // bytes_per_seed(config)))
+    cap = max(1, budget // bytes_per_seed(config))
+    calls = -(-share // cap)
+    return -(-share // calls)  # balanced: the padded last call wastes little
 
 
 def plan_run(
@@ -541,28 +544,42 @@ def run_seeds(
         # ``jax.enable_x64()``, so they must not trace. (Shares ``plan.fn``'s compilation cache.)
         fn = plan.fn.lower(key_struct, params).compile()
 
-    def call(start: int):
+    result = None
+    lock = threading.Lock()
+
+    def launch(start: int):
         keys = seed_keys(root, plan.chunk, int(first_seed) + start)  # fixed call shape
         if sharding is not None:
             keys = jax.device_put(keys, sharding)
+        return fn(keys, params)  # asynchronous on an accelerator
+
+    def collect(start: int, out) -> int:
+        nonlocal result
+        with lock:  # allocated from the first finished call: no extra trace for the shapes
+            if result is None:
+                result = jax.tree.map(
+                    lambda x: np.empty((num_seeds,) + x.shape[1:], x.dtype), out)
         size = min(plan.chunk, num_seeds - start)
-        out = fn(keys, params)
         for dst, src in zip(jax.tree.leaves(result), jax.tree.leaves(out)):
             dst[start:start + size] = np.asarray(src)[:size]
         return size
 
-    shapes = jax.eval_shape(plan.fn, key_struct, params)
-    result = jax.tree.map(lambda x: np.empty((num_seeds,) + x.shape[1:], x.dtype), shapes)
     starts = range(0, num_seeds, plan.chunk)
     done = 0
     if plan.workers == 1:
-        for start in starts:
-            done += call(start)
-            if progress is not None:
-                progress(done)
+        # the next call is launched before the previous one's outputs are copied to the host,
+        # so on an accelerator the copy overlaps the next call's compute
+        previous = None
+        for start in [*starts, None]:
+            current = None if start is None else (start, launch(start))
+            if previous is not None:
+                done += collect(*previous)
+                if progress is not None:
+                    progress(done)
+            previous = current
         return result
     with concurrent.futures.ThreadPoolExecutor(plan.workers) as pool:
-        pending = [pool.submit(call, start) for start in starts]
+        pending = [pool.submit(lambda st: collect(st, launch(st)), start) for start in starts]
         try:
             for future in concurrent.futures.as_completed(pending):
                 done += future.result()

@@ -151,6 +151,12 @@ def test_default_chunk_size_bounds_one_call():
     assert per_call <= 64 * 2**20
     assert sim.default_chunk_size(big, 10_000, backend="gpu") == 10_000
     assert sim.default_chunk_size(CFG, 7, backend="cpu") == 7
+    # balanced calls: the padded last call wastes less than one seed per call
+    chunk = sim.default_chunk_size(big, 10_000, backend="cpu")
+    calls = -(-10_000 // chunk)
+    assert calls > 1 and chunk * calls - 10_000 < calls
+    # one share per concurrent caller
+    assert sim.default_chunk_size(CFG, 1000, backend="cpu", workers=2) == 500
 
 
 def test_policies_and_estimators_run_finite():

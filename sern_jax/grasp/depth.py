@@ -48,7 +48,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
+from sern_jax.grasp._mjx import mjx
 
 _CYLINDER = int(mujoco.mjtGeom.mjGEOM_CYLINDER)
 _MESH = int(mujoco.mjtGeom.mjGEOM_MESH)

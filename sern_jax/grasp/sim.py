@@ -410,7 +410,7 @@ def _mjx_program(
     ids: scene_lib.SceneIds, config: TrialConfig, half_open: float, timestep: float
 ):
     """Jitted batched trial for scenes with these indices and this schedule."""
-    from mujoco import mjx
+    from sern_jax.grasp._mjx import mjx
 
     obj_geoms = jnp.asarray(ids.object_geoms)
     palm_idx = jnp.asarray(ids.palm_qpos + ids.finger_qpos)
@@ -447,7 +447,7 @@ def _mjx_program(
 
 class _MjxRunner:
     def __init__(self, model, config):
-        from mujoco import mjx
+        from sern_jax.grasp._mjx import mjx
 
         self.model, self.config = model, config
         self.ids = scene_lib.scene_ids(model)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from mujoco import mjx
+from sern_jax.grasp._mjx import mjx
 
 from sern_jax.grasp import depth as dp
 

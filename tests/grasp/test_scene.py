@@ -55,7 +55,7 @@ def test_resting_pose_is_seeded():
 
 
 def test_mjx_accepts_the_scene():
-    from mujoco import mjx
+    from sern_jax.grasp._mjx import mjx
 
     model = scene.build_scene(objects.make_object("triangular_prism"))
     mx = mjx.put_model(model)

@@ -78,6 +78,21 @@ def _csv_ints(text: str, name: str) -> list[int]:
     return values
 
 
+def _first_and_best(call, repeats):
+    """(result, first-call seconds, best of ``repeats`` timed calls) of a jitted ``call``."""
+    import jax
+
+    t = time.perf_counter()
+    result = jax.block_until_ready(call())
+    first = time.perf_counter() - t
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        result = jax.block_until_ready(call())
+        best = min(best, time.perf_counter() - t)
+    return result, first, best
+
+
 def _machine() -> dict:
     import jax
 
@@ -301,63 +316,50 @@ def run(args) -> int:
         stages["mjx_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
     out["backends"] = backends
 
-    # Depth images and candidate sets (Grasp B's modules).
+    # Depth images and candidate sets (depth.py and candidates.py on this scene).
     if depth_batch:
-        try:
-            from sern_jax.grasp import candidates as cand_lib
-            from sern_jax.grasp import depth as depth_lib
-        except ImportError as e:  # pragma: no cover - depends on the other module
-            out["depth"] = out["candidates"] = f"not available: {e}"
-        else:
-            cam = depth_lib.CameraConfig()
-            params = depth_lib.overhead_params(cam)
-            mx = depth_lib.camera_model(model)
-            poses = depth_lib.geom_poses(scene_lib.initial_data(model))
-            batch_poses = jax.tree.map(
-                lambda a: jax.numpy.broadcast_to(a, (depth_batch, *a.shape)), poses
-            )
-            batch_params = jax.tree.map(
-                lambda a: jax.numpy.broadcast_to(a, (depth_batch, *jax.numpy.shape(a))),
-                params,
-            )
-            render = depth_lib.make_renderer(cam)
-            t = time.perf_counter()
-            img = jax.block_until_ready(render(mx, batch_poses, batch_params))
-            first = time.perf_counter() - t
-            best = np.inf
-            for _ in range(repeats):
-                t = time.perf_counter()
-                img = jax.block_until_ready(render(mx, batch_poses, batch_params))
-                best = min(best, time.perf_counter() - t)
-            out["depth"] = {
-                "batch": depth_batch,
-                "shape": list(cam.shape),
-                "images_per_s": depth_batch / best,
-                "compile_s": max(first - best, 0.0),
-            }
-            stages["depth_image_s"] = best / depth_batch
-            log(f"depth  batch {depth_batch:6d}: {depth_batch / best:9.1f} images/s")
-            sampler = cand_lib.make_sampler(cand_lib.CandidateConfig())
-            keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(
-                jax.numpy.arange(depth_batch)
-            )
-            t = time.perf_counter()
-            c = jax.block_until_ready(sampler(keys, img.depth, params))
-            first = time.perf_counter() - t
-            best = np.inf
-            for _ in range(repeats):
-                t = time.perf_counter()
-                c = jax.block_until_ready(sampler(keys, img.depth, params))
-                best = min(best, time.perf_counter() - t)
-            out["candidates"] = {
-                "batch": depth_batch,
-                "num_candidates": int(c.grasps.shape[-2]),
-                "sets_per_s": depth_batch / best,
-                "valid_fraction": float(np.mean(c.valid)),
-                "compile_s": max(first - best, 0.0),
-            }
-            stages["candidate_set_s"] = best / depth_batch
-            log(f"cands  batch {depth_batch:6d}: {depth_batch / best:9.1f} sets/s")
+        from sern_jax.grasp import candidates as cand_lib
+        from sern_jax.grasp import depth as depth_lib
+
+        cam = depth_lib.CameraConfig()
+        params = depth_lib.overhead_params(cam)
+        mx = depth_lib.camera_model(model)
+        poses = depth_lib.geom_poses(scene_lib.initial_data(model))
+        batch_poses = jax.tree.map(
+            lambda a: jax.numpy.broadcast_to(a, (depth_batch, *a.shape)), poses
+        )
+        batch_params = jax.tree.map(
+            lambda a: jax.numpy.broadcast_to(a, (depth_batch, *jax.numpy.shape(a))),
+            params,
+        )
+        render = depth_lib.make_renderer(cam)
+        img, first, best = _first_and_best(
+            lambda: render(mx, batch_poses, batch_params), repeats
+        )
+        out["depth"] = {
+            "batch": depth_batch,
+            "shape": list(cam.shape),
+            "images_per_s": depth_batch / best,
+            "compile_s": max(first - best, 0.0),
+        }
+        stages["depth_image_s"] = best / depth_batch
+        log(f"depth  batch {depth_batch:6d}: {depth_batch / best:9.1f} images/s")
+        sampler = cand_lib.make_sampler(cand_lib.CandidateConfig())
+        keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(
+            jax.numpy.arange(depth_batch)
+        )
+        c, first, best = _first_and_best(
+            lambda: sampler(keys, img.depth, params), repeats
+        )
+        out["candidates"] = {
+            "batch": depth_batch,
+            "num_candidates": int(c.grasps.shape[-2]),
+            "sets_per_s": depth_batch / best,
+            "valid_fraction": float(np.mean(c.valid)),
+            "compile_s": max(first - best, 0.0),
+        }
+        stages["candidate_set_s"] = best / depth_batch
+        log(f"cands  batch {depth_batch:6d}: {depth_batch / best:9.1f} sets/s")
     out["stages"] = stages
 
     if args.agreement:
@@ -382,7 +384,7 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    """``python -m sern_jax.grasp.bench`` without the lead's cli."""
+    """``python -m sern_jax.grasp.bench grasp ...`` (the same as ``sern bench grasp ...``)."""
     parser = argparse.ArgumentParser(prog="sern bench")
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser(sub)

@@ -28,6 +28,7 @@ import dataclasses
 import hashlib
 import math
 import os
+import re
 from pathlib import Path
 
 import jax
@@ -530,19 +531,38 @@ def hard_object_names() -> tuple[str, ...]:
 
 
 def make_object(name: str) -> ObjectSpec:
-    """Returns the named object (see :func:`object_names`).
+    """Returns the named object: one of :func:`object_names`, or a population member.
+
+    A population member is named as :func:`sample_population` (default kinds) names it,
+    ``<kind>_<seed>_<index>``: ``"L_1_0"`` is ``sample_population(1, n)[0]``.
 
     Raises:
-      ValueError: unknown name (the message lists the known ones).
+      ValueError: unknown name (the message lists the known ones), or a population name
+        whose kind is not the kind drawn for that seed and index.
     """
     if name in _NAMED:
         return _NAMED[name]()
     if name in _HARD:
         return _HARD[name]()
+    match = _POPULATION_NAME.fullmatch(name)
+    if match and match["kind"] in POPULATION_KINDS:
+        seed, index = int(match["seed"]), int(match["index"])
+        spec = sample_object(jax.random.fold_in(jax.random.key(seed), index))
+        spec = dataclasses.replace(spec, name=f"{spec.kind}_{seed}_{index}")
+        if spec.kind != match["kind"]:
+            raise ValueError(
+                f"population object {index} of seed {seed} is {spec.name!r}, not {name!r}"
+            )
+        return spec
     raise ValueError(
         f"unknown object {name!r}; known objects: {', '.join(object_names())}"
-        " (or pass a mesh path ending in .obj/.stl)"
+        f", population members <kind>_<seed>_<index> (kind in {', '.join(POPULATION_KINDS)};"
+        " as named by sample_population), or a mesh path ending in .obj/.stl"
     )
+
+
+# A member of sample_population(seed, n), by the name that function gives it.
+_POPULATION_NAME = re.compile(r"(?P<kind>[A-Za-z]+)_(?P<seed>\d+)_(?P<index>\d+)")
 
 
 # ----------------------------------------------------------------------------- meshes

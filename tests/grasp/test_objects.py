@@ -51,6 +51,18 @@ def test_population_is_seeded_and_in_range():
     assert objects.sample_population(3, 5) == a[:5]
 
 
+def test_population_members_resolve_by_name():
+    pop = objects.sample_population(3, 12)
+    for o in pop:
+        assert objects.resolve_object(o.name) == o
+    # Same seed and index, another kind: not that member, and the error says which it is.
+    wrong = next(k for k in objects.POPULATION_KINDS if k != pop[0].kind)
+    with pytest.raises(ValueError, match=pop[0].name):
+        objects.resolve_object(f"{wrong}_3_0")
+    with pytest.raises(ValueError, match="blob_3_0"):
+        objects.resolve_object("blob_3_0")
+
+
 def test_sample_object_rejects_bad_kind():
     with pytest.raises(ValueError, match="blob"):
         objects.sample_object(0, kinds=("box", "blob"))

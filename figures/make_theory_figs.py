@@ -168,19 +168,46 @@ def fig_alpha0(fd, out, written):
     _save(fig, out / "ratio_vs_T_alpha0.png", written)
 
 
-def fig_l1(data, out, written):
+_L1_PANELS = (  # check, instance title, uniform-play R/T, label of the tested estimator
+    ("alg1_l1_median", "L1 argmin (median): r = (0.9, 0.6)", 0.15, "L1 loss, argmin (median)"),
+    ("alg1_argmax_literal", "L1 argmax as printed: r = (0.9, 0.3)", 0.3,
+     "L1 loss, argmax (1 − median)"),
+)
+
+
+def fig_l1(fd, out, written):
+    """Algorithm 1's L1 fit (argmin and the printed argmax) against the squared-loss mean."""
+    plt = _plt()
+    panels = [p for p in _L1_PANELS if fd.get(p[0])]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), 4), squeeze=False)
+    for ax, (name, title, uniform, label) in zip(axes[0], panels):
+        for est, c in fd[name]["curves"].items():
+            lab = "add-half mean (squared loss)" if est == "addhalf" else label
+            ax.plot(c["ts"], c["ratio"], "o-", label=lab)
+        ax.axhline(uniform, color="gray", ls=":", label=f"{uniform:g} = uniform-policy regret/T")
+        ax.set_xscale("log")
+        ax.set_xlabel("T")
+        ax.set_ylabel("R_T / T")
+        ax.set_title(f"{title}, α = 1/ln(T^0.3)", fontsize=9)
+        ax.legend(fontsize=7)
+    _save(fig, out / "l1_loss_failure.png", written)
+
+
+def fig_fixed_alpha(data, out, written):
+    """R_T/T at the paper's fixed α = 0.05: flat at Σ π_a Δ_a, not decreasing to 0."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for est, c in data["curves"].items():
-        lab = "L1 loss (median), Algorithm 1" if est == "l1median" else "add-half mean (squared loss)"
-        ax.plot(c["ts"], c["ratio"], "o-", label=lab)
-    ax.axhline(0.15, color="gray", ls=":", label="0.15 = uniform-policy regret/T")
+        ax.plot(c["ts"], c["ratio"], "o-", label=f"{est} estimator")
+    ax.axhline(data["limit"], color="gray", ls=":",
+               label=f"Σ_a softmax(r/α)_a Δ_a = {data['limit']:.4f}")
     ax.set_xscale("log")
+    ax.set_ylim(bottom=0)
     ax.set_xlabel("T")
     ax.set_ylabel("R_T / T")
-    ax.set_title("r = (0.9, 0.6), α = 1/ln(T^0.3)")
+    ax.set_title("fixed α = 0.05, K = 64, means 0.9 … 0.1", fontsize=9)
     ax.legend(fontsize=7)
-    _save(fig, out / "l1_loss_failure.png", written)
+    _save(fig, out / "fixed_alpha.png", written)
 
 
 def fig_flip(data, out, written):
@@ -210,12 +237,14 @@ def make_all(run_dir: str | Path) -> list[Path]:
     written: list[Path] = []
     makers = (("t1_minprob_pathwise", fig_counts), ("t2_tail_mc", fig_tail),
               ("t4_bound_vs_regret", fig_regret_vs_bounds), ("t4_bound_vs_regret", fig_tstar),
-              ("alg1_l1_median", fig_l1), ("t4_term3_flip", fig_flip))
+              ("t4_term3_flip", fig_flip), ("exp_fixed_alpha", fig_fixed_alpha))
     for name, fn in makers:
         if fd.get(name):
             fn(fd[name], out, written)
     if fd.get("t5_alpha0_small") or fd.get("t5_ratio_decreasing"):
         fig_alpha0(fd, out, written)
+    if fd.get("alg1_l1_median") or fd.get("alg1_argmax_literal"):
+        fig_l1(fd, out, written)
     return written
 
 

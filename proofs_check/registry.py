@@ -31,6 +31,9 @@ NAMES = (
     "t5_alpha0_small",
     "t5_worst_case_rate",
     "alg1_l1_median",
+    "alg1_argmax_literal",
+    # the paper's experimental setting
+    "exp_fixed_alpha",
 )
 
 

@@ -20,6 +20,8 @@ gauss      r_a + σ_n ξ, σ_n = (1−ε)β/(√(2/π)√(n+1)), ξ ~ N(0,1)  co
 flip       1 − r_a w.p. q_n = q_c/√(n+1), else r_a                conditional mean only, heavy tail
 pinned     0 for ``pinned_arm``, 1 for every other arm            not an A3 estimator (Thm 1–2 worst case)
 l1median   sample median of the 0/1 rewards (Algorithm 1's L1)   FAILS: tends to 1{r > ½}
+l1argmax   1 − l1median: Algorithm 1's argmax of the L1 loss, as   FAILS: tends to 1{r < ½}
+           printed (the error-maximising fit)
 ========== ===================================================== ==============================
 
 For the tabular estimators ``n`` is the (context, arm) count; for the oracles it is ``n_a``,
@@ -60,10 +62,11 @@ ESTIMATOR_NAMES = (
     "flip",
     "pinned",
     "l1median",
+    "l1argmax",
 )
 ORACLE_NAMES = ("exact", "adv", "adv_low", "rademacher", "gauss", "flip", "pinned")
 # Estimators whose r̂ in a context changes only for the pulled arm of that context.
-LOCAL_ESTIMATORS = ("exact", "addhalf", "mean", "pinned", "l1median")
+LOCAL_ESTIMATORS = ("exact", "addhalf", "mean", "pinned", "l1median", "l1argmax")
 
 
 class EstimatorState(NamedTuple):
@@ -170,11 +173,13 @@ def make_estimator(name: str, clip: bool = True) -> Estimator:
             return (sums + 0.5) / (n + 1.0)
         if name == "mean":
             return jnp.where(n > 0, sums / jnp.maximum(n, 1.0), 0.5)
-        if name == "l1median":
+        if name in ("l1median", "l1argmax"):
             # argmin_x Σ|R_i − x| over 0/1 rewards: 1 if more ones, 0 if more zeros, ½ on ties
-            # (the midpoint of the set of minimisers) and at n = 0.
+            # (the midpoint of the set of minimisers) and at n = 0. Σ|R_i − x| is linear in x
+            # on [0, 1], so its argmax (Algorithm 1 as printed) is the mirror image, 1 − median.
             twice = 2.0 * sums
-            return jnp.where(twice > n, 1.0, jnp.where(twice < n, 0.0, 0.5)).astype(dtype)
+            median = jnp.where(twice > n, 1.0, jnp.where(twice < n, 0.0, 0.5)).astype(dtype)
+            return median if name == "l1median" else 1.0 - median
         if name == "pinned":
             return jnp.where(jnp.arange(num_arms) == params.pinned_arm, 0.0, 1.0).astype(dtype)
         scale = _oracle_scale(state.arm_counts, params, dtype)

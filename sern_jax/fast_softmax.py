@@ -4,7 +4,7 @@
 semantics, random streams and outputs of ``simulate.make_run(config)``, for the configurations
 that :func:`supports` accepts: the softmax policy, one context, no diagnostics, and an estimator
 whose r̂ changes only for the pulled arm (``estimators.LOCAL_ESTIMATORS``: exact, addhalf,
-mean, pinned, l1median). Every α schedule is constant within a run, so all are supported.
+mean, pinned, l1median, l1argmax). Every α schedule is constant within a run, so all are supported.
 
 Why it is faster. The general runner recomputes ``softmax(r̂/α)`` (K exponentials), its
 ``cumsum`` and ``Σ_a π_a r_a`` every round. Here:
@@ -166,9 +166,10 @@ def _local_rhat(name: str, n: Array, s: Array, r_true: Array, pinned: Array, dty
         r = (s + 0.5) / (nf + 1.0)
     elif name == "mean":
         r = jnp.where(nf > 0, s / jnp.maximum(nf, 1.0), 0.5)
-    elif name == "l1median":
+    elif name in ("l1median", "l1argmax"):
         twice = 2.0 * s
         r = jnp.where(twice > nf, 1.0, jnp.where(twice < nf, 0.0, 0.5)).astype(dtype)
+        r = r if name == "l1median" else 1.0 - r
     elif name == "exact":
         r = r_true
     elif name == "pinned":

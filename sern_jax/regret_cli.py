@@ -28,7 +28,8 @@ def add_parser(subparsers) -> None:
                    help="comma list from: softmax, greedy, epsilon_greedy, ucb1, thompson, "
                         "boltzmann_gumbel, exp3")
     p.add_argument("--estimator", default=d.estimator,
-                   help="exact, addhalf, mean, adv, rademacher, gauss, flip, pinned, l1median")
+                   help="exact, addhalf, mean, adv, adv_low, rademacher, gauss, flip, pinned, "
+                        "l1median, l1argmax")
     p.add_argument("--arms", type=int, default=d.num_arms, help="number of arms K")
     p.add_argument("--means", default=d.means,
                    help="'linspace' (0.9 down to 0.1), 'random' (U[0,1] per seed) or a comma "

@@ -39,6 +39,7 @@ def test_contextual_update_touches_one_cell():
     ("addhalf", [(1 + 0.5) / 3, 0.5, (1 + 0.5) / 2]),
     ("mean", [0.5, 0.5, 1.0]),
     ("l1median", [0.5, 0.5, 1.0]),
+    ("l1argmax", [0.5, 0.5, 0.0]),
     ("pinned", [1.0, 0.0, 1.0]),
 ])
 def test_deterministic_predictions(name, expected):

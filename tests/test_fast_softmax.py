@@ -14,6 +14,7 @@ F64_CASES = [
     ("addhalf", "constant", 7, 300, True, 0.05),
     ("mean", "log", 5, 257, False, 1.0),
     ("l1median", "theorem4", 6, 200, True, 1.0),
+    ("l1argmax", "log", 3, 140, True, 1.0),
     ("exact", "constant", 4, 150, False, 0.2),
     ("pinned", "constant", 3, 130, True, 0.3),
 ]

@@ -101,7 +101,7 @@ def test_figures_from_saved_results(quick_run):
     made = make_theory_figs.make_all(run_dir)
     names = {p.name for p in made}
     for expected in ("counts_vs_c.png", "tail_bounds.png", "regret_vs_bounds.png",
-                     "ratio_vs_T_alpha0.png", "l1_loss_failure.png"):
+                     "ratio_vs_T_alpha0.png", "l1_loss_failure.png", "fixed_alpha.png"):
         assert expected in names
     assert any(n.startswith("tstar_heatmap") for n in names)
     assert all(p.stat().st_size > 10_000 for p in made)

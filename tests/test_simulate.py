@@ -278,16 +278,15 @@ def test_diagnostics_exact_oracle_identities():
 
 MEM_SCRIPT = textwrap.dedent("""
     import json, sys
-    from sern_jax import problems, simulate as sim
+    from sern_jax import io, problems, simulate as sim
     horizon = int(sys.argv[1])
     cfg = sim.RunConfig(num_arms=64, horizon=horizon, num_checkpoints=40, random_means=True)
     params = sim.default_params(cfg, problems.bernoulli([0.5] * 64), alpha0=0.05)
     out = sim.run_seeds(cfg, params, num_seeds=10_000)
     assert out.counts.shape == (10_000, sim.checkpoint_times(cfg).size, 64)
-    # VmHWM, not getrusage's ru_maxrss: the latter carries the parent's peak over fork/exec
-    # (pytest's own ~2 GB after the other tests), VmHWM belongs to this process's memory only.
-    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0]
-    print(json.dumps({"peak_rss_mb": int(hwm.split()[1]) / 1024}))
+    # io.peak_rss_mb reads VmHWM: getrusage's ru_maxrss would carry the parent's peak over
+    # fork/exec (pytest's own ~2 GB after the other tests).
+    print(json.dumps({"peak_rss_mb": io.peak_rss_mb()}))
 """)
 
 

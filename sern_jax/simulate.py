@@ -553,13 +553,23 @@ def run_seeds(
             keys = jax.device_put(keys, sharding)
         return fn(keys, params)  # asynchronous on an accelerator
 
+    # Pinned outputs are always copied into numpy arrays of our own (below), so the pinned
+    # buffers go back to JAX's pool at once and the next call reuses them: page-locking a new
+    # buffer costs about as much as the pageable copy it replaces.
+    pinned = _use_pinned_host(mesh)
+
     def collect(start: int, out) -> int:
         nonlocal result
-        for leaf in jax.tree.leaves(out):
-            leaf.copy_to_host_async()  # all outputs' transfers in flight at once
+        if pinned:
+            # page-locked host buffers: one DMA per output, and numpy views them without a copy
+            out = jax.device_put(out, jax.tree.map(
+                lambda x: x.sharding.with_memory_kind("pinned_host"), out))
+        else:
+            for leaf in jax.tree.leaves(out):
+                leaf.copy_to_host_async()  # all outputs' transfers in flight at once
         size = min(plan.chunk, num_seeds - start)
-        if size == num_seeds:  # one call holds every seed: keep its host arrays, no copy
-            result = jax.tree.map(lambda x: x[:size], jax.device_get(out))
+        if size == num_seeds and not pinned:  # one call, host arrays: keep them, no copy
+            result = jax.tree.map(lambda x: np.asarray(x)[:size], out)
             return size
         with lock:  # allocated from the first finished call: no extra trace for the shapes
             if result is None:
@@ -595,6 +605,19 @@ def run_seeds(
                 future.cancel()
             raise
     return result
+
+
+def _use_pinned_host(mesh) -> bool:
+    """Whether run_seeds moves outputs to the host through page-locked ("pinned_host") memory.
+
+    On an accelerator a plain device-to-host copy lands in pageable memory: measured on one
+    H100, 1.17 GB/s for a 1.5 GB output, against 50 GB/s into pinned host memory, which numpy
+    then views without a copy. On CPU the outputs are already in host memory.
+    """
+    devices = jax.devices() if mesh is None else list(mesh.devices.flat)
+    if devices[0].platform == "cpu":
+        return False
+    return all("pinned_host" in {m.kind for m in d.addressable_memories()} for d in devices)
 
 
 _RUNNERS: dict = {}

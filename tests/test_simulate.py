@@ -255,8 +255,12 @@ SHARD_SCRIPT = textwrap.dedent("""
     mesh = seed_mesh(4)
     sharded = sim.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh)
     plain = sim.run_seeds(cfg, params, seed=3, num_seeds=103)
+    sim._use_pinned_host = lambda mesh: True  # the accelerator transfer path, on the CPU mesh
+    pinned = sim.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40)
     print(json.dumps({"devices": len(jax.devices()),
                       "counts_equal": bool(np.array_equal(sharded.counts, plain.counts)),
+                      "pinned_equal": bool(np.array_equal(pinned.counts, sharded.counts)
+                                           and np.array_equal(pinned.regret_rb, sharded.regret_rb)),
                       "regret_maxdiff": float(np.abs(sharded.regret_rb - plain.regret_rb).max())}))
 """)
 
@@ -269,7 +273,7 @@ def test_sharded_equals_unsharded():
     assert res.returncode == 0, res.stderr[-2000:]
     report = json.loads(res.stdout.strip().splitlines()[-1])
     assert report["devices"] == 4
-    assert report["counts_equal"]
+    assert report["counts_equal"] and report["pinned_equal"]
     assert report["regret_maxdiff"] <= 1e-4
 
 

@@ -43,6 +43,8 @@ __all__ = [
     "ESTIMATOR_NAMES",
     "ORACLE_NAMES",
     "LOCAL_ESTIMATORS",
+    "TABULAR_ESTIMATORS",
+    "tabular_rhat",
     "EstimatorState",
     "Estimator",
     "OracleParams",
@@ -67,6 +69,30 @@ ESTIMATOR_NAMES = (
 ORACLE_NAMES = ("exact", "adv", "adv_low", "rademacher", "gauss", "flip", "pinned")
 # Estimators whose r̂ in a context changes only for the pulled arm of that context.
 LOCAL_ESTIMATORS = ("exact", "addhalf", "mean", "pinned", "l1median", "l1argmax")
+
+
+# Estimators whose r̂ is a function of one cell's (count, reward sum) alone.
+TABULAR_ESTIMATORS = ("addhalf", "mean", "l1median", "l1argmax")
+
+
+def tabular_rhat(name: str, counts: Array, sums: Array, dtype) -> Array:
+    """r̂ of the tabular estimators from counts and reward sums (elementwise, any shape).
+
+    Shared by :func:`make_estimator` and ``fast_softmax`` (which evaluates one arm at a time).
+    """
+    n = counts.astype(dtype)
+    if name == "addhalf":
+        return (sums + 0.5) / (n + 1.0)
+    if name == "mean":
+        return jnp.where(n > 0, sums / jnp.maximum(n, 1.0), 0.5)
+    if name in ("l1median", "l1argmax"):
+        # argmin_x Σ|R_i − x| over 0/1 rewards: 1 if more ones, 0 if more zeros, ½ on ties
+        # (the midpoint of the set of minimisers) and at n = 0. Σ|R_i − x| is linear in x
+        # on [0, 1], so its argmax (Algorithm 1 as printed) is the mirror image, 1 − median.
+        twice = 2.0 * sums
+        median = jnp.where(twice > n, 1.0, jnp.where(twice < n, 0.0, 0.5)).astype(dtype)
+        return median if name == "l1median" else 1.0 - median
+    raise ValueError(f"{name!r} is not a tabular estimator; choose one of {TABULAR_ESTIMATORS}")
 
 
 class EstimatorState(NamedTuple):
@@ -166,20 +192,10 @@ def make_estimator(name: str, clip: bool = True) -> Estimator:
             counts, sums = state.counts[0], state.sums[0]
         else:
             counts, sums = state.counts[context], state.sums[context]
-        n = counts.astype(dtype)
         if name == "exact":
             return means_row
-        if name == "addhalf":
-            return (sums + 0.5) / (n + 1.0)
-        if name == "mean":
-            return jnp.where(n > 0, sums / jnp.maximum(n, 1.0), 0.5)
-        if name in ("l1median", "l1argmax"):
-            # argmin_x Σ|R_i − x| over 0/1 rewards: 1 if more ones, 0 if more zeros, ½ on ties
-            # (the midpoint of the set of minimisers) and at n = 0. Σ|R_i − x| is linear in x
-            # on [0, 1], so its argmax (Algorithm 1 as printed) is the mirror image, 1 − median.
-            twice = 2.0 * sums
-            median = jnp.where(twice > n, 1.0, jnp.where(twice < n, 0.0, 0.5)).astype(dtype)
-            return median if name == "l1median" else 1.0 - median
+        if name in TABULAR_ESTIMATORS:
+            return tabular_rhat(name, counts, sums, dtype)
         if name == "pinned":
             return jnp.where(jnp.arange(num_arms) == params.pinned_arm, 0.0, 1.0).astype(dtype)
         scale = _oracle_scale(state.arm_counts, params, dtype)

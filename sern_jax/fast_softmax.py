@@ -161,15 +161,8 @@ class _Carry(NamedTuple):
 
 def _local_rhat(name: str, n: Array, s: Array, r_true: Array, pinned: Array, dtype) -> Array:
     """r̂ of one arm from its count/sum, clipped to [0, 1] (matches ``estimators``)."""
-    nf = n.astype(dtype)
-    if name == "addhalf":
-        r = (s + 0.5) / (nf + 1.0)
-    elif name == "mean":
-        r = jnp.where(nf > 0, s / jnp.maximum(nf, 1.0), 0.5)
-    elif name in ("l1median", "l1argmax"):
-        twice = 2.0 * s
-        r = jnp.where(twice > nf, 1.0, jnp.where(twice < nf, 0.0, 0.5)).astype(dtype)
-        r = r if name == "l1median" else 1.0 - r
+    if name in est_lib.TABULAR_ESTIMATORS:
+        r = est_lib.tabular_rhat(name, n, s, dtype)
     elif name == "exact":
         r = r_true
     elif name == "pinned":

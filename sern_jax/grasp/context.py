@@ -1,0 +1,323 @@
+"""One grasp context from an object spec and a key: scene, resting pose, depth, candidates.
+
+This is the one path ``object spec + key -> scene -> resting pose -> depth image -> K
+antipodal candidates`` that ``sern grasp show``, ``sern grasp bench``, the dataset
+generator and the online learner all call:
+
+* :func:`make_context` ``(key, spec, config) -> GraspContext``: one context (its own scene,
+  ``model.qpos0`` holding the pose).
+* :func:`make_contexts` ``(key, spec, num_poses, config, model=None) -> GraspContexts``:
+  ``P`` resting poses of one object in one shared scene, their depth images and candidate
+  sets rendered and sampled in one jitted batch. Pose ``i`` equals
+  ``make_context(jax.random.fold_in(key, i), spec, config)``.
+
+Randomness (the STYLE.md stream convention): context ``i`` of ``make_contexts`` uses
+``key_i = fold_in(key, i)``; from ``key_i`` the resting-pose seed, the depth noise and
+the candidate sampling are drawn from ``fold_in(key_i, POSE_STREAM)``,
+``fold_in(key_i, DEPTH_NOISE_STREAM)`` and ``fold_in(key_i, CANDIDATE_STREAM)``. The
+resting pose is simulated by native MuJoCo (``scene.resting_pose``, an int seed): the
+seed is 31 random bits of the pose stream.
+
+Compiled code: one jitted ``render + sample`` function per (camera, candidate, noise)
+configuration, cached at module level, so calls with the same configuration, the same
+number of poses and scenes of the same structure never recompile. (The ray caster reads the
+geom types and convex-mesh planes on the host at trace time, so a scene of a different
+structure -- another geom type, another mesh -- is traced once more on first use.)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+
+from sern_jax.grasp import candidates as cand_lib
+from sern_jax.grasp import depth as depth_lib
+from sern_jax.grasp import objects as objects_lib
+from sern_jax.grasp import scene as scene_lib
+
+__all__ = [
+    "POSE_STREAM",
+    "DEPTH_NOISE_STREAM",
+    "CANDIDATE_STREAM",
+    "ContextConfig",
+    "GraspContext",
+    "GraspContexts",
+    "pose_seeds",
+    "make_context",
+    "make_contexts",
+    "scene_model",
+    "copy_model",
+]
+
+POSE_STREAM = 0  # fold_in id: resting-pose seed
+DEPTH_NOISE_STREAM = 1  # fold_in id: depth sensor noise
+CANDIDATE_STREAM = 2  # fold_in id: antipodal candidate sampling
+
+
+@dataclasses.dataclass(frozen=True)
+class ContextConfig:
+    """Static settings of a grasp context (defaults: what ``sern grasp show`` uses).
+
+    Attributes:
+      camera: depth camera (image size, intrinsics, noise defaults); the camera looks
+        straight down at the origin (``depth.overhead_params``).
+      candidates: antipodal sampler (K = ``num_candidates`` slots).
+      scene: physics and solver settings of the scene (and the resting-pose drop).
+      noise: whether to add Dex-Net-style depth sensor noise.
+    """
+
+    camera: depth_lib.CameraConfig = depth_lib.CameraConfig()
+    candidates: cand_lib.CandidateConfig = cand_lib.CandidateConfig()
+    scene: scene_lib.SceneConfig = scene_lib.SceneConfig()
+    noise: bool = False
+
+    def __post_init__(self):
+        for name, cls in (
+            ("camera", depth_lib.CameraConfig),
+            ("candidates", cand_lib.CandidateConfig),
+            ("scene", scene_lib.SceneConfig),
+        ):
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(
+                    f"ContextConfig.{name} must be a {cls.__name__}, "
+                    f"got {type(getattr(self, name)).__name__}"
+                )
+        if not isinstance(self.noise, bool):
+            raise ValueError(f"ContextConfig.noise must be a bool, got {self.noise!r}")
+
+
+class GraspContext(NamedTuple):
+    """One grasp context (numpy leaves)."""
+
+    model: mujoco.MjModel  # the scene; model.qpos0 holds `pose`
+    pose: np.ndarray  # [7] object resting pose (x, y, z, qw, qx, qy, qz), world frame
+    depth: np.ndarray  # [H, W] float32 planar depth, metres
+    camera: depth_lib.CameraParams  # the overhead camera that took `depth`
+    candidates: cand_lib.Candidates  # K slots ([K, 4] grasps, [K] valid, ...)
+
+
+class GraspContexts(NamedTuple):
+    """P grasp contexts of one object in one shared scene (numpy leaves)."""
+
+    model: mujoco.MjModel  # the shared scene; model.qpos0 holds poses[0]
+    poses: np.ndarray  # [P, 7] object resting poses (x, y, z, qw, qx, qy, qz)
+    depth: np.ndarray  # [P, H, W] float32 planar depth, metres
+    camera: depth_lib.CameraParams  # one overhead camera, shared (unbatched leaves)
+    candidates: cand_lib.Candidates  # leaves with a leading [P]: grasps [P, K, 4], ...
+
+    def context(self, i: int) -> GraspContext:
+        """Context ``i`` alone, with its own copy of the model (qpos0 = ``poses[i]``)."""
+        model = copy_model(self.model)
+        scene_lib.set_object_pose(model, self.poses[i])
+        return GraspContext(
+            model=model,
+            pose=self.poses[i],
+            depth=self.depth[i],
+            camera=self.camera,
+            candidates=jax.tree.map(lambda x: x[i], self.candidates),
+        )
+
+
+def copy_model(model: mujoco.MjModel) -> mujoco.MjModel:
+    """An independent copy of a MuJoCo model (``set_object_pose`` edits in place)."""
+    import copy
+
+    return copy.copy(model)
+
+
+def scene_model(
+    spec: objects_lib.ObjectSpec, config: ContextConfig = ContextConfig()
+) -> mujoco.MjModel:
+    """The compiled scene of ``spec`` with the object not yet dropped (pass as ``model``).
+
+    Raises:
+      ValueError: ``spec`` is not an ObjectSpec or does not compile.
+    """
+    if not isinstance(spec, objects_lib.ObjectSpec):
+        raise ValueError(f"spec must be an ObjectSpec, got {type(spec).__name__}")
+    try:
+        return mujoco.MjModel.from_xml_string(scene_lib.scene_xml(spec, config.scene))
+    except ValueError as e:
+        raise ValueError(f"object {spec.name!r} does not compile: {e}") from e
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _keys(key: jax.Array, num: int):
+    """Per-context keys fold_in(key, i) for i < num: [num]."""
+    return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(num))
+
+
+@jax.jit
+def _streams(keys: jax.Array):
+    """Seeds and keys of the three streams of each context key in ``keys`` [P]."""
+
+    def one(k):
+        seed = jax.random.bits(jax.random.fold_in(k, POSE_STREAM), (), jnp.uint32)
+        return (
+            (seed >> 1).astype(jnp.int32),  # 31 bits: a non-negative int32
+            jax.random.fold_in(k, DEPTH_NOISE_STREAM),
+            jax.random.fold_in(k, CANDIDATE_STREAM),
+        )
+
+    return jax.vmap(one)(keys)
+
+
+def pose_seeds(keys: jax.Array) -> np.ndarray:
+    """The ``scene.resting_pose`` seed of each context key: keys [P] -> int [P]."""
+    return np.asarray(_streams(keys)[0]).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=None)
+def _pipeline(
+    camera: depth_lib.CameraConfig, candidates: cand_lib.CandidateConfig, noise: bool
+):
+    """jit(vmap(render -> sample)) over poses; one per static configuration."""
+
+    def one(m, poses, params, key_noise, key_cand):
+        image = depth_lib.render(
+            camera, m, poses, params, key_noise if noise else None
+        )
+        cands = cand_lib.sample(candidates, key_cand, image.depth, params)
+        return image.depth, cands
+
+    return jax.jit(jax.vmap(one, (None, 0, None, 0, 0)))
+
+
+def _geom_poses(model: mujoco.MjModel, poses: np.ndarray) -> depth_lib.GeomPoses:
+    """Geom poses [P, ngeom, ...] of the scene with the object at each pose, gripper parked."""
+    data = scene_lib.initial_data(model)
+    a = scene_lib.scene_ids(model).object_qpos
+    xpos = np.empty((len(poses), model.ngeom, 3), np.float32)
+    xmat = np.empty((len(poses), model.ngeom, 3, 3), np.float32)
+    for i, pose in enumerate(poses):
+        data.qpos[a : a + 7] = pose
+        mujoco.mj_kinematics(model, data)
+        xpos[i] = data.geom_xpos
+        xmat[i] = data.geom_xmat.reshape(-1, 3, 3)
+    return depth_lib.GeomPoses(geom_xpos=xpos, geom_xmat=xmat)
+
+
+def _contexts(
+    keys: jax.Array,
+    model: mujoco.MjModel,
+    config: ContextConfig,
+) -> tuple[np.ndarray, np.ndarray, depth_lib.CameraParams, cand_lib.Candidates]:
+    """Poses, depth, camera and candidates for context keys [P] in one scene."""
+    seeds, keys_noise, keys_cand = _streams(keys)
+    seeds = np.asarray(seeds)
+    poses = np.stack(
+        [
+            scene_lib.resting_pose(
+                model, int(s), config.scene.xy_jitter, config.scene.settle_steps
+            )
+            for s in seeds
+        ]
+    )
+    params = depth_lib.overhead_params(config.camera)
+    m = depth_lib.camera_model(model)
+    fn = _pipeline(config.camera, config.candidates, config.noise)
+    depth, cands = fn(m, _geom_poses(model, poses), params, keys_noise, keys_cand)
+    to_np = functools.partial(jax.tree.map, np.asarray)
+    return poses, np.asarray(depth), to_np(params), to_np(cands)
+
+
+def make_context(
+    key: jax.Array,
+    spec: objects_lib.ObjectSpec,
+    config: ContextConfig = ContextConfig(),
+) -> GraspContext:
+    """One grasp context: the object at a random resting pose, its depth image, K grasps.
+
+    Args:
+      key: PRNG key; consumed (pose seed, depth noise and candidates come from its
+        ``POSE_STREAM``, ``DEPTH_NOISE_STREAM`` and ``CANDIDATE_STREAM`` fold-ins).
+      spec: the object.
+      config: camera, candidate and scene settings, depth noise on/off.
+
+    Returns:
+      GraspContext(model [its own scene, qpos0 = pose], pose [7], depth [H, W], camera,
+      candidates [K slots]).
+
+    Raises:
+      ValueError: bad spec / config, the object does not compile or does not come to rest.
+    """
+    _check_key(key)
+    if not isinstance(config, ContextConfig):
+        raise ValueError(f"config must be a ContextConfig, got {type(config).__name__}")
+    model = scene_model(spec, config)
+    poses, depth, camera, cands = _contexts(key[None], model, config)
+    scene_lib.set_object_pose(model, poses[0])
+    return GraspContext(
+        model=model,
+        pose=poses[0],
+        depth=depth[0],
+        camera=camera,
+        candidates=jax.tree.map(lambda x: x[0], cands),
+    )
+
+
+def make_contexts(
+    key: jax.Array,
+    spec: objects_lib.ObjectSpec,
+    num_poses: int,
+    config: ContextConfig = ContextConfig(),
+    model: mujoco.MjModel | None = None,
+) -> GraspContexts:
+    """``num_poses`` grasp contexts of one object, rendered and sampled in one batch.
+
+    Context ``i`` equals ``make_context(jax.random.fold_in(key, i), spec, config)`` (same
+    pose, depth and candidates; float leaves within float32 batching noise).
+
+    Args:
+      key: PRNG key; consumed. Context ``i`` uses ``fold_in(key, i)``.
+      spec: the object.
+      num_poses: P >= 1.
+      config: camera, candidate and scene settings, depth noise on/off.
+      model: optional scene of ``spec`` to reuse (``scene_model(spec, config)`` or a
+        ``scene.build_scene`` result); its qpos0 is overwritten with ``poses[0]``. None
+        builds one.
+
+    Returns:
+      GraspContexts(model [shared], poses [P, 7], depth [P, H, W], camera, candidates
+      [P, K, ...]).
+
+    Raises:
+      ValueError: bad arguments, or an object that does not compile or come to rest.
+    """
+    _check_key(key)
+    if not isinstance(config, ContextConfig):
+        raise ValueError(f"config must be a ContextConfig, got {type(config).__name__}")
+    if isinstance(num_poses, bool) or not isinstance(num_poses, (int, np.integer)):
+        raise ValueError(f"num_poses must be an int >= 1, got {num_poses!r}")
+    if num_poses < 1:
+        raise ValueError(f"num_poses must be >= 1, got {num_poses}")
+    if model is None:
+        model = scene_model(spec, config)
+    elif not isinstance(model, mujoco.MjModel):
+        raise ValueError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
+    else:
+        scene_lib.scene_ids(model)  # raises if it is not a grasp scene
+    poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config)
+    scene_lib.set_object_pose(model, poses[0])
+    return GraspContexts(
+        model=model, poses=poses, depth=depth, camera=camera, candidates=cands
+    )
+
+
+def _check_key(key) -> None:
+    if not (
+        isinstance(key, jax.Array)
+        and jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
+        and key.shape == ()
+    ):
+        raise ValueError(
+            "key must be one typed PRNG key (jax.random.key(seed)), got "
+            f"{getattr(key, 'dtype', type(key).__name__)} "
+            f"shape {getattr(key, 'shape', None)}"
+        )

@@ -34,6 +34,30 @@ from pathlib import Path
 import jax
 import numpy as np
 
+__all__ = [
+    "GEOM_TYPES",
+    "MIN_SIZE_M",
+    "MAX_SIZE_M",
+    "MIN_MASS_KG",
+    "MAX_MASS_KG",
+    "MAX_MESH_VERTICES",
+    "POPULATION_KINDS",
+    "GeomSpec",
+    "ObjectSpec",
+    "quat_to_mat",
+    "axis_angle_quat",
+    "geom_points",
+    "cylinder_geom",
+    "ellipsoid_geom",
+    "sample_object",
+    "sample_population",
+    "object_names",
+    "hard_object_names",
+    "make_object",
+    "load_mesh",
+    "resolve_object",
+]
+
 GEOM_TYPES = ("box", "sphere", "capsule", "mesh")
 MIN_SIZE_M = 0.02  # smallest extent of the procedural population (2 cm)
 MAX_SIZE_M = 0.10  # largest extent of the procedural population (10 cm)
@@ -94,27 +118,11 @@ class GeomSpec:
         return np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
 
     def points(self) -> np.ndarray:
-        """Surface points of the geom in the body frame, ``[P, 3]`` (exact corners for
-        boxes and meshes, a low-poly sampling incl. the 6 axis extremes for round geoms)."""
-        if self.type == "mesh":
-            local = self.vertex_array
-        elif self.type == "box":
-            a, b, c = self.size
-            local = np.array(
-                [
-                    [sx * a, sy * b, sz * c]
-                    for sx in (-1, 1)
-                    for sy in (-1, 1)
-                    for sz in (-1, 1)
-                ]
-            )
-        elif self.type == "sphere":
-            local = _sphere_points(self.size[0])
-        else:  # capsule
-            r, h = self.size[0], self.size[1]
-            sph = _sphere_points(r)
-            local = np.concatenate([sph + [0, 0, h], sph - [0, 0, h]])
-        return local @ quat_to_mat(self.quat).T + np.asarray(self.pos)
+        """Surface points of the geom in the body frame, ``[P, 3]`` (see
+        :func:`geom_points`)."""
+        return geom_points(self.type, self.size, self.vertex_array) @ quat_to_mat(
+            self.quat
+        ).T + np.asarray(self.pos)
 
     @property
     def volume(self) -> float:
@@ -200,6 +208,36 @@ def axis_angle_quat(axis, angle: float) -> tuple[float, float, float, float]:
     axis = axis / np.linalg.norm(axis)
     s = math.sin(angle / 2)
     return (math.cos(angle / 2), *(float(v) for v in axis * s))
+
+
+def geom_points(type_: str, size, vertices=None) -> np.ndarray:
+    """Surface points of one geom in its own frame, ``[P, 3]``: the one switch over types.
+
+    Exact corners for boxes and meshes; for spheres and capsules a low-poly sampling that
+    includes the 6 axis extremes (capsules: of both end spheres).
+
+    Args:
+      type_: ``"box"``, ``"sphere"``, ``"capsule"`` or ``"mesh"``.
+      size: MuJoCo size triple (see :class:`GeomSpec`).
+      vertices: ``[V, 3]`` mesh vertices in the geom frame (meshes only).
+
+    Returns:
+      float64 ``[P, 3]`` points, metres.
+    """
+    if type_ == "mesh":
+        return np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if type_ == "box":
+        a, b, c = (float(v) for v in size[:3])
+        return np.array(
+            [[sx * a, sy * b, sz * c] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+        )
+    if type_ == "sphere":
+        return _sphere_points(float(size[0]))
+    if type_ == "capsule":
+        r, h = float(size[0]), float(size[1])
+        sph = _sphere_points(r)
+        return np.concatenate([sph + [0, 0, h], sph - [0, 0, h]])
+    raise ValueError(f"geom type must be one of {GEOM_TYPES}, got {type_!r}")
 
 
 def _sphere_points(r: float, num_lon: int = 8) -> np.ndarray:
@@ -345,6 +383,110 @@ def _pipe_tee() -> ObjectSpec:
     return ObjectSpec("pipe_tee", (run, branch, hexnut), 0.3, "hard", "industrial")
 
 
+def _ellipse_ring(a: float, b: float, z: float, n: int = 10) -> np.ndarray:
+    """``n`` points of an ellipse with semi-axes (a, b) in the plane at height z."""
+    ang = 2 * math.pi * np.arange(n) / n
+    return np.stack([a * np.cos(ang), b * np.sin(ang), np.full(n, z)], 1)
+
+
+def _detergent_bottle() -> ObjectSpec:
+    """KIT BathDetergent-like: a heavy (450 g), flat bottle with a tilted nozzle cap.
+
+    Body: convex hull of elliptic rings (6.6 x 3.6 cm, tapering to 4.4 x 2.6 cm shoulders),
+    8 cm tall, topped by an off-centre cap tilted 25°. Hard for a parallel jaw: the
+    rounded flanks give no parallel faces, the body is long (10 cm) so grasps along it
+    collide, and the cap and shoulders, which make many of the depth edges, are far from
+    the centre of mass of a heavy body, so grasps there twist out during lift and shake.
+    """
+    body = np.concatenate(
+        [
+            _ellipse_ring(0.031, 0.016, -0.045),
+            _ellipse_ring(0.033, 0.018, 0.015),
+            _ellipse_ring(0.022, 0.013, 0.035),
+        ]
+    )
+    cap = cylinder_geom(
+        0.011,
+        0.012,
+        pos=(0.008, 0.0, 0.045),
+        quat=axis_angle_quat((0, 1, 0), math.radians(25)),
+        sides=8,
+    )
+    return ObjectSpec(
+        "detergent_bottle", (_mesh(body), cap), 0.45, "hard", "detergent_bottle"
+    )
+
+
+def _handle_jug() -> ObjectSpec:
+    """A bottle with a handle (KIT-style jug): 5.8 cm body, 8 cm tall, 500 g.
+
+    The loop handle (two 1 cm struts and a grip bar) sticks out 3 cm from the body: its
+    many depth edges give thin, off-centre candidates on a heavy object, and pads aimed
+    at the body's far side land on the handle. Good grasps: across the body, clear of
+    the handle.
+    """
+    body = cylinder_geom(0.029, 0.04)
+    upper = _capsule(0.005, 0.012, pos=(0.041, 0.0, 0.025), quat=_ROT_Y90)
+    lower = _capsule(0.005, 0.012, pos=(0.041, 0.0, -0.025), quat=_ROT_Y90)
+    grip = _capsule(0.006, 0.025, pos=(0.053, 0.0, 0.0))
+    return ObjectSpec(
+        "handle_jug", (body, upper, lower, grip), 0.5, "hard", "bottle_with_handle"
+    )
+
+
+def _tless_part_a() -> ObjectSpec:
+    """T-LESS 19/20-like: a 9.4 x 4 x 1.2 cm base plate with a 3 cm block on top (300 g).
+
+    The base is longer than the 8.5 cm opening, so every grasp whose jaw axis runs along
+    it (most pairs on the block's and plate's step edges) lands a pad on the plate;
+    the good grasps are the few across the 4 cm width.
+    """
+    base = _box(0.047, 0.02, 0.006, pos=(0, 0, -0.012))
+    block = _box(0.015, 0.015, 0.013, pos=(0.008, 0, 0.007))
+    boss = cylinder_geom(0.006, 0.004, pos=(-0.032, 0, -0.002), sides=8)
+    return ObjectSpec("tless_part_a", (base, block, boss), 0.3, "hard", "industrial")
+
+
+def _tless_part_b() -> ObjectSpec:
+    """T-LESS 10-like connector housing: a wedge (6 cm base, 2 cm top, 3.6 cm tall, 7 cm
+    long; sides 61° from the table) with a round boss on top (250 g).
+
+    The sloped, non-parallel flanks push the object down and out of the jaws; only grasps
+    along the 7 cm length (on the parallel end faces) or low on the base hold.
+    """
+    half_len = 0.035
+    prof = [(-0.03, -0.018), (0.03, -0.018), (0.01, 0.018), (-0.01, 0.018)]
+    pts = [[x, y, z] for x in (-half_len, half_len) for y, z in prof]
+    boss = cylinder_geom(0.007, 0.006, pos=(0, 0, 0.022), sides=8)
+    return ObjectSpec("tless_part_b", (_mesh(pts), boss), 0.25, "hard", "industrial")
+
+
+def _salt_cylinder() -> ObjectSpec:
+    """KIT salt/marjoram-container-like: a 7.4 cm wide, 6.5 cm tall cylinder with a 7.8 cm
+    lid rim (200 g).
+
+    Standing, the lid leaves 3.5 mm of clearance per pad at the full 8.5 cm opening, so
+    the 2 mm execution error often lands a pad on the rim; lying, only grasps across its
+    length hold.
+    """
+    body = cylinder_geom(0.037, 0.029, pos=(0, 0, -0.004))
+    lid = cylinder_geom(0.039, 0.004, pos=(0, 0, 0.029))
+    return ObjectSpec("salt_cylinder", (body, lid), 0.2, "hard", "container")
+
+
+def _mallet() -> ObjectSpec:
+    """A small mallet (handled tool): a dense 3 x 3 x 4 cm head on a 7 cm, 1.2 cm thick
+    handle (450 g, centre of mass in the head).
+
+    The long handle yields most of the depth edges, hence most candidates, and grasps
+    on it hold a heavy head 4-7 cm away, which twists out of the jaws; the good grasps
+    are on the head or the handle's root.
+    """
+    head = _box(0.015, 0.02, 0.015, pos=(-0.035, 0, 0))
+    handle = _capsule(0.006, 0.035, pos=(0.015, 0, -0.006), quat=_ROT_Y90)
+    return ObjectSpec("mallet", (head, handle), 0.45, "hard", "handled_tool")
+
+
 _HARD = {
     "triangular_prism": _triangular_prism,
     "round_stapler": _round_stapler,
@@ -352,6 +494,12 @@ _HARD = {
     "slim_bottle": _slim_bottle,
     "bracket": _bracket,
     "pipe_tee": _pipe_tee,
+    "detergent_bottle": _detergent_bottle,
+    "handle_jug": _handle_jug,
+    "tless_part_a": _tless_part_a,
+    "tless_part_b": _tless_part_b,
+    "salt_cylinder": _salt_cylinder,
+    "mallet": _mallet,
 }
 
 # ----------------------------------------------------------------------------- population

@@ -435,56 +435,51 @@ def _handle_jug() -> ObjectSpec:
 
 
 def _tless_part_a() -> ObjectSpec:
-    """T-LESS 19/20-like: a 9.4 x 4 x 1.2 cm base plate with a 3 cm block on top (300 g).
+    """T-LESS-like plug: a 4.4 cm round post on a pyramidal base (7 cm square, sides
+    45° from the table, 2.6 cm tall; 250 g).
 
-    The base is longer than the 8.5 cm opening, so every grasp whose jaw axis runs along
-    it (most pairs on the block's and plate's step edges) lands a pad on the plate;
-    the good grasps are the few across the 4 cm width.
+    The base's 45° faces are depth edges (steeper than the sampler's threshold) but too
+    shallow to hold: a pad squeezing them pushes the part down and slips off on lift
+    (friction <= 1). The good grasps are across the post, high enough that the pads
+    clear the base: a narrow region of the candidates.
     """
-    base = _box(0.047, 0.02, 0.006, pos=(0, 0, -0.012))
-    block = _box(0.015, 0.015, 0.013, pos=(0.008, 0, 0.007))
-    boss = cylinder_geom(0.006, 0.004, pos=(-0.032, 0, -0.002), sides=8)
-    return ObjectSpec("tless_part_a", (base, block, boss), 0.3, "hard", "industrial")
+    lo, hi, h = 0.035, 0.009, 0.026
+    sq = [(sx, sy) for sx in (-1, 1) for sy in (-1, 1)]
+    base = [[lo * sx, lo * sy, -0.035] for sx, sy in sq]
+    base += [[hi * sx, hi * sy, -0.035 + h] for sx, sy in sq]
+    post = cylinder_geom(0.008, 0.022, pos=(0, 0, 0.013))
+    return ObjectSpec("tless_part_a", (_mesh(base), post), 0.25, "hard", "industrial")
 
 
 def _tless_part_b() -> ObjectSpec:
-    """T-LESS 10-like connector housing: a wedge (6 cm base, 2 cm top, 3.6 cm tall, 7 cm
-    long; sides 61° from the table) with a round boss on top (250 g).
+    """T-LESS-like connector housing: a wedge (trapezoid 6.4 cm at the base, 1.6 cm on
+    top, 2.4 cm tall: flanks 45° from the table; 5.6 cm long) with a boss (220 g).
 
-    The sloped, non-parallel flanks push the object down and out of the jaws; only grasps
-    along the 7 cm length (on the parallel end faces) or low on the base hold.
+    The two 45° flanks are large depth-edge regions, so most antipodal pairs squeeze
+    them and slip on lift; on either flank it rests with the other flank upright and the
+    base at 45°, again non-parallel. The good grasps close on the two parallel end faces
+    (5.6 cm apart), a minority of the edges.
     """
-    half_len = 0.035
-    prof = [(-0.03, -0.018), (0.03, -0.018), (0.01, 0.018), (-0.01, 0.018)]
+    half_len = 0.028
+    prof = [(-0.032, -0.012), (0.032, -0.012), (0.008, 0.012), (-0.008, 0.012)]
     pts = [[x, y, z] for x in (-half_len, half_len) for y, z in prof]
-    boss = cylinder_geom(0.007, 0.006, pos=(0, 0, 0.022), sides=8)
-    return ObjectSpec("tless_part_b", (_mesh(pts), boss), 0.25, "hard", "industrial")
+    boss = cylinder_geom(0.006, 0.005, pos=(0, 0, 0.016), sides=8)
+    return ObjectSpec("tless_part_b", (_mesh(pts), boss), 0.22, "hard", "industrial")
 
 
-def _salt_cylinder() -> ObjectSpec:
-    """KIT salt/marjoram-container-like: a 7.4 cm wide, 6.5 cm tall cylinder with a 7.8 cm
-    lid rim (200 g).
+def _tless_part_c() -> ObjectSpec:
+    """T-LESS-like ridge cover: a roof prism (isosceles right triangle, 7 cm base, 3.5 cm
+    tall, 5 cm long; 180 g) with a small tab on one end.
 
-    Standing, the lid leaves 3.5 mm of clearance per pad at the full 8.5 cm opening, so
-    the 2 mm execution error often lands a pad on the rim; lying, only grasps across its
-    length hold.
+    Both roof faces are at 45°, so squeezing across the ridge fails; on a roof face it
+    rests with the other face upright and the base at 45°. Only the two parallel ends
+    (5 cm apart) hold.
     """
-    body = cylinder_geom(0.037, 0.029, pos=(0, 0, -0.004))
-    lid = cylinder_geom(0.039, 0.004, pos=(0, 0, 0.029))
-    return ObjectSpec("salt_cylinder", (body, lid), 0.2, "hard", "container")
-
-
-def _mallet() -> ObjectSpec:
-    """A small mallet (handled tool): a dense 3 x 3 x 4 cm head on a 7 cm, 1.2 cm thick
-    handle (450 g, centre of mass in the head).
-
-    The long handle yields most of the depth edges, hence most candidates, and grasps
-    on it hold a heavy head 4-7 cm away, which twists out of the jaws; the good grasps
-    are on the head or the handle's root.
-    """
-    head = _box(0.015, 0.02, 0.015, pos=(-0.035, 0, 0))
-    handle = _capsule(0.006, 0.035, pos=(0.015, 0, -0.006), quat=_ROT_Y90)
-    return ObjectSpec("mallet", (head, handle), 0.45, "hard", "handled_tool")
+    half_len = 0.025
+    prof = [(-0.035, -0.0117), (0.035, -0.0117), (0.0, 0.0233)]
+    pts = [[x, y, z] for x in (-half_len, half_len) for y, z in prof]
+    tab = _box(0.004, 0.012, 0.005, pos=(0.029, 0, -0.0067))
+    return ObjectSpec("tless_part_c", (_mesh(pts), tab), 0.18, "hard", "industrial")
 
 
 _HARD = {
@@ -498,8 +493,7 @@ _HARD = {
     "handle_jug": _handle_jug,
     "tless_part_a": _tless_part_a,
     "tless_part_b": _tless_part_b,
-    "salt_cylinder": _salt_cylinder,
-    "mallet": _mallet,
+    "tless_part_c": _tless_part_c,
 }
 
 # ----------------------------------------------------------------------------- population

@@ -435,7 +435,7 @@ def _handle_jug() -> ObjectSpec:
 
 
 def _tless_part_a() -> ObjectSpec:
-    """T-LESS-like plug: a 4.4 cm round post on a pyramidal base (7 cm square, sides
+    """T-LESS-like plug: a 3.2 cm round post on a pyramidal base (7 cm square, sides
     45° from the table, 2.6 cm tall; 250 g).
 
     The base's 45° faces are depth edges (steeper than the sampler's threshold) but too
@@ -447,13 +447,13 @@ def _tless_part_a() -> ObjectSpec:
     sq = [(sx, sy) for sx in (-1, 1) for sy in (-1, 1)]
     base = [[lo * sx, lo * sy, -0.035] for sx, sy in sq]
     base += [[hi * sx, hi * sy, -0.035 + h] for sx, sy in sq]
-    post = cylinder_geom(0.008, 0.022, pos=(0, 0, 0.013))
+    post = cylinder_geom(0.008, 0.016, pos=(0, 0, 0.007))
     return ObjectSpec("tless_part_a", (_mesh(base), post), 0.25, "hard", "industrial")
 
 
 def _tless_part_b() -> ObjectSpec:
-    """T-LESS-like connector housing: a wedge (trapezoid 6.4 cm at the base, 1.6 cm on
-    top, 2.4 cm tall: flanks 45° from the table; 5.6 cm long) with a boss (220 g).
+    """T-LESS-like connector housing: a wedge (trapezoid 6.6 cm at the base, 0.8 cm on
+    top, 2.5 cm tall: flanks 41° from the table; 5.6 cm long) with a boss (220 g).
 
     The two 45° flanks are large depth-edge regions, so most antipodal pairs squeeze
     them and slip on lift; on either flank it rests with the other flank upright and the
@@ -461,7 +461,7 @@ def _tless_part_b() -> ObjectSpec:
     (5.6 cm apart), a minority of the edges.
     """
     half_len = 0.028
-    prof = [(-0.032, -0.012), (0.032, -0.012), (0.008, 0.012), (-0.008, 0.012)]
+    prof = [(-0.033, -0.0125), (0.033, -0.0125), (0.004, 0.0125), (-0.004, 0.0125)]
     pts = [[x, y, z] for x in (-half_len, half_len) for y, z in prof]
     boss = cylinder_geom(0.006, 0.005, pos=(0, 0, 0.016), sides=8)
     return ObjectSpec("tless_part_b", (_mesh(pts), boss), 0.22, "hard", "industrial")

@@ -1,6 +1,6 @@
 """Regret-curve experiment: several policies, one problem, many seeds, saved run directory.
 
-Thin main over the library (STYLE.md §4): builds configs, runs ``simulate.run_seeds`` per policy
+Thin main over the library (STYLE.md §4): builds configs, runs ``executor.run_seeds`` per policy
 in seed chunks, saves each finished chunk atomically (so an interrupted run resumes where it
 stopped), merges them into ``results.npz`` and writes ``report.md``. Plotting lives in
 ``figures/make_regret_figs.py`` and reads the saved results only.
@@ -115,6 +115,7 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
     """Runs (or resumes) the experiment into ``out_dir``; returns the run directory."""
     import jax
 
+    from sern_jax import executor
     from sern_jax import simulate as sim
 
     ctx = jax.enable_x64() if exp.float64 else _nullcontext()
@@ -143,7 +144,7 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
         num_chunks = math.ceil(exp.num_seeds / chunk)
         # one fixed call shape for every saved chunk (the last, smaller one too), split so that
         # each core runs its own calls
-        per_call = math.ceil(chunk / sim.concurrent_calls(mesh))
+        per_call = math.ceil(chunk / executor.concurrent_calls(mesh))
         bar = _progress_bar(len(triples) * exp.num_seeds, progress)
         timings = {}
         for policy, cfg, params in triples:
@@ -155,8 +156,8 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
                 if path.exists():
                     bar.update(size)
                     continue
-                out = sim.run_seeds(cfg, params, exp.seed, size, first_seed=c * chunk,
-                                    chunk_size=per_call, mesh=mesh)
+                out = executor.run_seeds(cfg, params, exp.seed, size, first_seed=c * chunk,
+                                         chunk_size=per_call, mesh=mesh)
                 io.save_npz(path, **{f: getattr(out, f) for f in FIELDS})
                 ran = True
                 bar.update(size)

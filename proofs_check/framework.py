@@ -369,7 +369,7 @@ def engine_run(*, estimator: str, means, horizon: int, num_seeds: int, alpha0: f
     """
     import jax
 
-    from sern_jax import problems, simulate
+    from sern_jax import executor, problems, simulate
 
     m = np.asarray(means, dtype=np.float64)
     key = (estimator, m.tobytes(), m.shape, horizon, num_seeds, float(alpha0), policy, schedule,
@@ -388,7 +388,7 @@ def engine_run(*, estimator: str, means, horizon: int, num_seeds: int, alpha0: f
                                  horizon=int(horizon), num_checkpoints=num_checkpoints,
                                  clip=clip, dtype="float64", diagnostics=diagnostics)
         params = simulate.default_params(cfg, prob, alpha0=alpha0, p=p, **oracle)
-        out = simulate.run_seeds(cfg, params, seed=seed, num_seeds=num_seeds)
+        out = executor.run_seeds(cfg, params, seed=seed, num_seeds=num_seeds)
         out = jax.tree.map(np.asarray, out)
         times = simulate.checkpoint_times(cfg)
     res = (out, times)

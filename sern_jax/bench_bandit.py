@@ -8,12 +8,13 @@ on the log-spaced checkpoint grid.
 
 Four ways of running that same workload, in one process:
 
-* ``run_seeds``: ``simulate.run_seeds``, the entry point users call: it picks the fast runner
+* ``run_seeds``: ``executor.run_seeds``, the entry point users call: it picks the fast runner
   below and, on CPU, runs one jitted call per core at once (a compiled call uses one core
   there), copying outputs to NumPy; timed end to end;
 * ``fast``: :mod:`sern_jax.fast_softmax` as one jitted call (one core on CPU; exact, same
   random streams as the general runner);
-* ``general``: ``jit(vmap(simulate.make_run(config)))``, the engine's general runner;
+* ``general``: ``executor.batched_runner(config)`` = ``jit(vmap(simulate.make_run(config)))``,
+  the engine's general runner;
 * ``numpy``: a NumPy reference vectorised over seeds with a Python loop over t (float32,
   inverse CDF with one uniform per round, the same outputs); it may run fewer seeds
   (``--numpy-seeds``).
@@ -175,7 +176,7 @@ def run(args) -> int:
     load_before = os.getloadavg()
     import jax
 
-    from sern_jax import fast_softmax, problems, sharding
+    from sern_jax import executor, fast_softmax, problems, sharding
     from sern_jax import simulate as sim
 
     config = sim.RunConfig(policy="softmax", estimator="addhalf", schedule="constant",
@@ -235,17 +236,17 @@ def run(args) -> int:
 
     # ---- run_seeds: the public entry point users call (the fast runner here, with one call per
     # CPU core at once, outputs copied to NumPy): timed end to end, compile apart
-    plan = sim.plan_run(config, params, args.seeds, mesh=mesh)
+    plan = executor.plan_run(config, params, args.seeds, mesh=mesh)
     t0 = time.perf_counter()
     plan.fn.lower(jax.ShapeDtypeStruct((plan.chunk,), root.dtype), params).compile()
     rs_compile = time.perf_counter() - t0
     rs_times, rs_out = [], None
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        rs_out = sim.run_seeds(config, params, args.seed, args.seeds, mesh=mesh)
+        rs_out = executor.run_seeds(config, params, args.seed, args.seeds, mesh=mesh)
         rs_times.append(time.perf_counter() - t0)
     rs_rate = work / statistics.median(rs_times)
-    result["run_seeds"] = {"engine_path": "sern_jax.simulate.run_seeds", "fast": plan.fast,
+    result["run_seeds"] = {"engine_path": "sern_jax.executor.run_seeds", "fast": plan.fast,
                            "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
                            "compile_s": rs_compile, "seed_rounds_per_s": rs_rate,
                            **_stats(rs_times)}
@@ -255,7 +256,7 @@ def run(args) -> int:
     general_rate = None
     general_out = None
     if args.general_repeats:
-        general_fn = sim._jitted_runner(config, mesh)
+        general_fn = executor.batched_runner(config, mesh)
         g_seeds = -(-args.seeds // num_devices) * num_devices
         g_keys = put(sim.seed_keys(root, g_seeds))
         t0 = time.perf_counter()

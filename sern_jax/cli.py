@@ -10,11 +10,11 @@ import argparse
 import importlib
 import sys
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "add_regret_parser"]
 
 # (module, attribute) contributing top-level commands.
 _TOP_LEVEL = (
-    ("sern_jax.regret_cli", "add_parser"),  # sern regret
+    ("sern_jax.cli", "add_regret_parser"),  # sern regret (wires experiments/ and figures/)
     ("proofs_check.cli", "add_parser"),  # sern check
 )
 # Commands under `sern bench ...`.
@@ -26,6 +26,18 @@ _BENCH = (
 _GRASP = (
     ("sern_jax.grasp.show", "add_parser"),  # sern grasp show
 )
+
+
+def add_regret_parser(subparsers) -> None:
+    """``sern regret``: this module is the one library module that imports the script folders
+    (``experiments/``, ``figures/``); it hands their functions to :mod:`sern_jax.regret_cli`."""
+    from experiments import regret
+    from figures import make_regret_figs
+    from sern_jax import regret_cli
+
+    regret_cli.add_parser(subparsers, defaults=regret.RegretExperiment(),
+                          run_experiment=regret.run_experiment,
+                          make_figures=make_regret_figs.make_figures)
 
 
 def _register(subparsers, entries) -> None:

@@ -208,9 +208,9 @@ def make_fast_run(
     def run(key: Key, params: sim.RunParams) -> sim.RunOutput:
         key_env = jax.random.fold_in(key, sim.ENV_STREAM)
         key_agent = jax.random.fold_in(key, sim.AGENT_STREAM)
-        key_problem = jax.random.fold_in(key_env, sim._PROBLEM)
-        kd_env = jax.random.key_data(jax.random.fold_in(key_env, sim._ROUNDS))
-        kd_agent = jax.random.key_data(jax.random.fold_in(key_agent, sim._ROUNDS))
+        key_problem = jax.random.fold_in(key_env, sim.PROBLEM_STREAM)
+        kd_env = jax.random.key_data(jax.random.fold_in(key_env, sim.ROUNDS_STREAM))
+        kd_agent = jax.random.key_data(jax.random.fold_in(key_agent, sim.ROUNDS_STREAM))
         del key
         problem = params.problem
         if config.random_means:

@@ -1,16 +1,33 @@
-"""``sern regret``: regret curves for several policies over many seeds."""
+"""``sern regret``: regret curves for several policies over many seeds.
+
+This module owns the command's arguments only. The experiment and the figures live in the
+script folders (``experiments/regret.py``, ``figures/make_regret_figs.py``), which library
+modules never import: :mod:`sern_jax.cli` imports them and hands them to :func:`add_parser`.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import functools
+from pathlib import Path
+from typing import Any, Callable
 
 __all__ = ["add_parser", "run"]
 
 
-def add_parser(subparsers) -> None:
-    from experiments.regret import RegretExperiment
+def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
+               make_figures: Callable | None = None) -> argparse.ArgumentParser:
+    """Registers ``regret`` under ``subparsers``.
 
-    d = RegretExperiment()
+    Args:
+      subparsers: from ``ArgumentParser.add_subparsers``.
+      defaults: a default experiment (``experiments.regret.RegretExperiment()``, a frozen
+        dataclass): its fields are the options' defaults, and the run replaces them.
+      run_experiment: ``run_experiment(exp, out_dir, progress=bool) -> run_dir``.
+      make_figures: ``make_figures(run_dir) -> [paths]``, or None (no figures).
+    """
+    d = defaults
     p = subparsers.add_parser(
         "regret",
         help="regret curves of SERN and peers over many seeds (saves a run directory + figures)",
@@ -56,16 +73,16 @@ def add_parser(subparsers) -> None:
                    help="run directory (default runs/regret-<fingerprint>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
-    p.set_defaults(func=run)
+    p.set_defaults(func=functools.partial(run, defaults=defaults, run_experiment=run_experiment,
+                                          make_figures=make_figures))
+    return p
 
 
-def run(args) -> int:
-    from pathlib import Path
-
-    from experiments.regret import RegretExperiment, run_experiment
-
-    exp = RegretExperiment(
-        policies=tuple(s.strip() for s in args.policies.split(",") if s.strip()),
+def run(args, *, defaults: Any, run_experiment: Callable,
+        make_figures: Callable | None = None) -> int:
+    """Runs the experiment described by ``args`` (see :func:`add_parser` for the rest)."""
+    exp = dataclasses.replace(
+        defaults, policies=tuple(s.strip() for s in args.policies.split(",") if s.strip()),
         estimator=args.estimator, num_arms=args.arms, means=args.means,
         num_contexts=args.contexts, gap=args.gap, horizon=args.horizon, num_seeds=args.seeds,
         schedule=args.schedule, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
@@ -74,9 +91,7 @@ def run(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"regret-{exp.fingerprint()}"
     run_dir = run_experiment(exp, out, progress=not args.no_progress)
     print((run_dir / "report.md").read_text())
-    if not args.no_figures:
-        from figures.make_regret_figs import make_figures
-
+    if not args.no_figures and make_figures is not None:
         for path in make_figures(run_dir):
             print(f"wrote {path}")
     print(f"run directory: {run_dir}")

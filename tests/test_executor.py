@@ -1,0 +1,235 @@
+"""The executor: planning, runner choice, chunking, pinned-host copies, sharding, memory, and
+the import graph of the core (no circle, no script folders)."""
+
+import ast
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sern_jax import executor, problems
+from sern_jax import simulate as sim
+
+CFG = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=5, horizon=300,
+                    num_checkpoints=12)
+PROB = problems.bernoulli([0.9, 0.8, 0.5, 0.3, 0.1])
+
+def test_no_recompile_when_alpha_changes():
+    cfg = sim.RunConfig(num_arms=4, horizon=50, num_checkpoints=5)
+    prob = problems.bernoulli([0.2, 0.4, 0.6, 0.8])
+    for runner in ("general", "fast"):
+        lo, hi = (sim.default_params(cfg, prob, alpha0=a) for a in (0.1, 2.0))
+        fn = executor.plan_run(cfg, lo, 64, runner=runner).fn
+        a = executor.run_seeds(cfg, lo, num_seeds=64, runner=runner)
+        b = executor.run_seeds(cfg, hi, num_seeds=64, runner=runner)
+        c = executor.run_seeds(cfg, lo, num_seeds=10, runner=runner, chunk_size=64)
+        assert fn._cache_size() == 1, runner
+        assert not np.array_equal(a.counts, b.counts)
+        np.testing.assert_array_equal(c.counts, a.counts[:10])
+    # a vmapped α sweep is one program too
+    run = sim.make_run(cfg)
+    params = sim.default_params(cfg, prob)
+    sweep = jax.jit(jax.vmap(jax.vmap(run, (0, None)), (None, 0)))
+    axes = jax.tree.map(lambda _: None, params)._replace(alpha0=0)
+    keys = sim.seed_keys(jax.random.key(0), 32)
+    sweep_fn = jax.jit(jax.vmap(jax.vmap(run, (0, None)), (None, axes)))
+    for grid in ([0.1, 0.5, 1.0], [0.2, 0.3, 3.0]):
+        out = sweep_fn(keys, params._replace(alpha0=jnp.asarray(grid)))
+        assert out.regret.shape == (3, 32, 5)
+    assert sweep_fn._cache_size() == 1
+    del sweep
+
+
+def test_run_seeds_dispatches_to_the_exact_fast_runner():
+    # auto takes fast_softmax exactly where it reproduces make_run, and the general runner
+    # elsewhere (diagnostics, other policies, α below the fast runner's float32 floor).
+    params = sim.default_params(CFG, PROB, alpha0=0.1)
+    assert executor.plan_run(CFG, params, 10).fast
+    assert not executor.plan_run(CFG, params, 10, runner="general").fast
+    diag_cfg = dataclasses.replace(CFG, diagnostics=True)
+    assert not executor.plan_run(diag_cfg, params, 10).fast
+    tiny = sim.default_params(CFG, PROB, alpha0=0.005)
+    assert not executor.plan_run(CFG, tiny, 10).fast
+    assert np.isfinite(executor.run_seeds(CFG, tiny, num_seeds=8).regret_rb).all()
+    with pytest.raises(ValueError, match="runner='fast'"):
+        executor.plan_run(dataclasses.replace(CFG, policy="ucb1"), params, 10, runner="fast")
+    with pytest.raises(ValueError, match="unknown runner 'quick'"):
+        executor.run_seeds(CFG, params, num_seeds=4, runner="quick")
+    with pytest.raises(ValueError, match="chunk_size must be a positive integer, got 0"):
+        executor.run_seeds(CFG, params, num_seeds=4, chunk_size=0)
+    with pytest.raises(ValueError, match="first_seed"):
+        executor.run_seeds(CFG, params, num_seeds=4, first_seed=-1)
+
+
+def test_fast_and_general_runners_agree_through_run_seeds_float64():
+    with jax.enable_x64():
+        cfg = dataclasses.replace(CFG, dtype="float64")
+        params = sim.default_params(cfg, problems.bernoulli(PROB.means[0], dtype=jnp.float64),
+                                    alpha0=0.1)
+        fast = executor.run_seeds(cfg, params, seed=3, num_seeds=64, runner="fast")
+        general = executor.run_seeds(cfg, params, seed=3, num_seeds=64, runner="general")
+    np.testing.assert_array_equal(fast.counts, general.counts)
+    np.testing.assert_allclose(fast.regret_rb, general.regret_rb, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fast.compensator, general.compensator, rtol=1e-9, atol=1e-9)
+
+
+def test_pinned_host_transfer_gives_the_same_outputs(monkeypatch):
+    # The accelerator path (outputs staged through page-locked host memory), forced on CPU,
+    # which has that memory kind too: one call holding every seed, and several padded calls.
+    assert not executor.use_pinned_host(None)  # CPU: outputs are already host memory
+    params = sim.default_params(CFG, PROB, alpha0=0.1)
+    plain = [executor.run_seeds(CFG, params, seed=5, num_seeds=24, chunk_size=c) for c in (None, 10)]
+    monkeypatch.setattr(executor, "use_pinned_host", lambda mesh: True)
+    pinned = [executor.run_seeds(CFG, params, seed=5, num_seeds=24, chunk_size=c) for c in (None, 10)]
+    for a, b in zip(plain, pinned):
+        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+            assert isinstance(y, np.ndarray) and y.shape[0] == 24
+            np.testing.assert_array_equal(x, y)
+
+
+def test_default_chunk_size_bounds_one_call():
+    big = sim.RunConfig(num_arms=64, horizon=100_000, num_checkpoints=40)
+    per_call = executor.default_chunk_size(big, 10_000, backend="cpu") * executor.bytes_per_seed(big)
+    assert per_call <= 64 * 2**20
+    assert executor.default_chunk_size(big, 10_000, backend="gpu") == 10_000
+    assert executor.default_chunk_size(CFG, 7, backend="cpu") == 7
+    # balanced calls: the padded last call wastes less than one seed per call
+    chunk = executor.default_chunk_size(big, 10_000, backend="cpu")
+    calls = -(-10_000 // chunk)
+    assert calls > 1 and chunk * calls - 10_000 < calls
+    # one share per concurrent caller
+    assert executor.default_chunk_size(CFG, 1000, backend="cpu", workers=2) == 500
+
+
+SHARD_SCRIPT = textwrap.dedent("""
+    import json, numpy as np, jax
+    from sern_jax import executor, problems, simulate as sim
+    cfg = sim.RunConfig(num_arms=6, horizon=200, num_checkpoints=8)
+    prob = problems.bernoulli([0.1, 0.3, 0.5, 0.6, 0.7, 0.75])
+    params = sim.default_params(cfg, prob, alpha0=0.1)
+    from sern_jax.sharding import seed_mesh
+    mesh = seed_mesh(4)
+    sharded = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh)
+    plain = executor.run_seeds(cfg, params, seed=3, num_seeds=103)
+    executor.use_pinned_host = lambda mesh: True  # the accelerator transfer path, on the CPU mesh
+    pinned = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40)
+    print(json.dumps({"devices": len(jax.devices()),
+                      "counts_equal": bool(np.array_equal(sharded.counts, plain.counts)),
+                      "pinned_equal": bool(np.array_equal(pinned.counts, sharded.counts)
+                                           and np.array_equal(pinned.regret_rb, sharded.regret_rb)),
+                      "regret_maxdiff": float(np.abs(sharded.regret_rb - plain.regret_rb).max())}))
+""")
+
+
+def test_sharded_equals_unsharded():
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
+               JAX_PLATFORMS="cpu")
+    res = subprocess.run([sys.executable, "-c", SHARD_SCRIPT], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    report = json.loads(res.stdout.strip().splitlines()[-1])
+    assert report["devices"] == 4
+    assert report["counts_equal"] and report["pinned_equal"]
+    assert report["regret_maxdiff"] <= 1e-4
+
+
+MEM_SCRIPT = textwrap.dedent("""
+    import json, sys
+    from sern_jax import executor, io, problems, simulate as sim
+    horizon = int(sys.argv[1])
+    cfg = sim.RunConfig(num_arms=64, horizon=horizon, num_checkpoints=40, random_means=True)
+    params = sim.default_params(cfg, problems.bernoulli([0.5] * 64), alpha0=0.05)
+    out = executor.run_seeds(cfg, params, num_seeds=10_000)
+    assert out.counts.shape == (10_000, sim.checkpoint_times(cfg).size, 64)
+    # io.peak_rss_mb reads VmHWM: getrusage's ru_maxrss would carry the parent's peak over
+    # fork/exec (pytest's own ~2 GB after the other tests).
+    print(json.dumps({"peak_rss_mb": io.peak_rss_mb()}))
+""")
+
+
+def _peak_rss_mb(horizon):
+    res = subprocess.run([sys.executable, "-c", MEM_SCRIPT, str(horizon)], capture_output=True,
+                         text=True, timeout=3000, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])["peak_rss_mb"]
+
+
+def test_memory_does_not_grow_with_horizon_small():
+    # S = 10,000 seeds, K = 64: peak RSS stays under 2 GiB; memory is O(S·G·K), not O(S·T·K).
+    assert _peak_rss_mb(500) < 2048
+
+
+@pytest.mark.slow
+def test_memory_full_size():
+    # The issue's size: S = 10,000, T = 100,000, K = 64 (10^9 seed-rounds; minutes on 2 cores).
+    assert _peak_rss_mb(100_000) < 2048
+
+
+# ----------------------------------------------------------------------------- import graph
+
+ROOT = Path(__file__).resolve().parents[1]
+CORE = sorted(p.stem for p in (ROOT / "sern_jax").glob("*.py") if p.stem != "__init__")
+SCRIPT_FOLDERS = ("experiments", "figures", "proofs_check")
+CLI_MODULE = "cli"  # the one library module that wires the script folders
+
+
+def _imports(module: str) -> set[str]:
+    """Every module ``sern_jax/<module>.py`` imports, at any depth (function-level too)."""
+    tree = ast.parse((ROOT / "sern_jax" / f"{module}.py").read_text())
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module)
+            if node.module == "sern_jax":  # from sern_jax import simulate, ...
+                names.update(f"sern_jax.{a.name}" for a in node.names)
+    return names
+
+
+def test_core_import_graph_has_no_cycle_and_no_script_folders():
+    graph = {}
+    for module in CORE:
+        deps = _imports(module)
+        graph[module] = {d.split(".")[1] for d in deps
+                         if d.startswith("sern_jax.") and d.split(".")[1] in CORE}
+        tops = {d.split(".")[0] for d in deps}
+        if module != CLI_MODULE:
+            assert not tops & set(SCRIPT_FOLDERS), (module, tops & set(SCRIPT_FOLDERS))
+        assert not tops & {"mujoco", "flax"}, module
+        assert not any(d.startswith("sern_jax.grasp") for d in deps) or module == CLI_MODULE
+    assert graph["executor"] >= {"simulate", "fast_softmax"}
+    assert not graph["simulate"] & {"executor", "fast_softmax"}
+    assert "executor" not in graph["fast_softmax"]
+    # depth-first search for a cycle
+    state = {}
+
+    def visit(node, path):
+        if state.get(node) == "done":
+            return
+        assert state.get(node) != "open", f"import cycle: {' -> '.join(path + [node])}"
+        state[node] = "open"
+        for dep in sorted(graph[node]):
+            visit(dep, path + [node])
+        state[node] = "done"
+
+    for module in CORE:
+        visit(module, [])
+
+
+def test_each_core_module_imports_alone_in_a_fresh_interpreter():
+    # One interpreter per module: an import that only works after another module was imported
+    # first (the symptom of a circle) fails here.
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    for module in ["sern_jax", *(f"sern_jax.{m}" for m in CORE)]:
+        res = subprocess.run([sys.executable, "-c", f"import {module}"], env=env, cwd=ROOT,
+                             capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, (module, res.stderr[-2000:])

@@ -38,6 +38,7 @@ import numpy as np
 
 from sern_jax.grasp import candidates as cand_lib
 from sern_jax.grasp import depth as depth_lib
+from sern_jax.grasp import depth_native
 from sern_jax.grasp import objects as objects_lib
 from sern_jax.grasp import scene as scene_lib
 
@@ -45,6 +46,7 @@ __all__ = [
     "POSE_STREAM",
     "DEPTH_NOISE_STREAM",
     "CANDIDATE_STREAM",
+    "RENDERERS",
     "ContextConfig",
     "GraspContext",
     "GraspContexts",
@@ -58,6 +60,7 @@ __all__ = [
 POSE_STREAM = 0  # fold_in id: resting-pose seed
 DEPTH_NOISE_STREAM = 1  # fold_in id: depth sensor noise
 CANDIDATE_STREAM = 2  # fold_in id: antipodal candidate sampling
+RENDERERS = ("auto", "native", "jax")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,14 +73,23 @@ class ContextConfig:
       candidates: antipodal sampler (K = ``num_candidates`` slots).
       scene: physics and solver settings of the scene (and the resting-pose drop).
       noise: whether to add Dex-Net-style depth sensor noise.
+      renderer: ``"jax"`` (``depth.render``, MJX ray casting: the GPU path; compiles once
+        per scene structure, i.e. per object), ``"native"`` (``depth_native``: MuJoCo's C
+        ray caster, no compile per object, the CPU path) or ``"auto"`` (native on a CPU
+        backend, jax otherwise). Both give the same image (tests/grasp/test_context.py).
     """
 
     camera: depth_lib.CameraConfig = depth_lib.CameraConfig()
     candidates: cand_lib.CandidateConfig = cand_lib.CandidateConfig()
     scene: scene_lib.SceneConfig = scene_lib.SceneConfig()
     noise: bool = False
+    renderer: str = "auto"
 
     def __post_init__(self):
+        if self.renderer not in RENDERERS:
+            raise ValueError(
+                f"ContextConfig.renderer must be one of {RENDERERS}, got {self.renderer!r}"
+            )
         for name, cls in (
             ("camera", depth_lib.CameraConfig),
             ("candidates", cand_lib.CandidateConfig),
@@ -105,7 +117,7 @@ class GraspContext(NamedTuple):
 class GraspContexts(NamedTuple):
     """P grasp contexts of one object in one shared scene (numpy leaves)."""
 
-    model: mujoco.MjModel  # the shared scene; model.qpos0 holds poses[0]
+    model: mujoco.MjModel  # the shared scene, not modified: pass poses[i] as object_pose
     poses: np.ndarray  # [P, 7] object resting poses (x, y, z, qw, qx, qy, qz)
     depth: np.ndarray  # [P, H, W] float32 planar depth, metres
     camera: depth_lib.CameraParams  # one overhead camera, shared (unbatched leaves)
@@ -177,7 +189,7 @@ def pose_seeds(keys: jax.Array) -> np.ndarray:
 def _pipeline(
     camera: depth_lib.CameraConfig, candidates: cand_lib.CandidateConfig, noise: bool
 ):
-    """jit(vmap(render -> sample)) over poses; one per static configuration."""
+    """jit(vmap(render -> sample)) over poses; one per static configuration (JAX renderer)."""
 
     def one(m, poses, params, key_noise, key_cand):
         image = depth_lib.render(
@@ -187,6 +199,21 @@ def _pipeline(
         return image.depth, cands
 
     return jax.jit(jax.vmap(one, (None, 0, None, 0, 0)))
+
+
+@functools.lru_cache(maxsize=None)
+def _sampler(candidates: cand_lib.CandidateConfig):
+    """jit(vmap(sample)) over images: its program depends on the image shape only."""
+    return jax.jit(
+        jax.vmap(lambda k, d, p: cand_lib.sample(candidates, k, d, p), (0, 0, None))
+    )
+
+
+def _renderer(config: ContextConfig) -> str:
+    if config.renderer != "auto":
+        return config.renderer
+    native_ok = depth_native.supports(config.camera)
+    return "native" if native_ok and jax.default_backend() == "cpu" else "jax"
 
 
 def _geom_poses(model: mujoco.MjModel, poses: np.ndarray) -> depth_lib.GeomPoses:
@@ -220,9 +247,17 @@ def _contexts(
         ]
     )
     params = depth_lib.overhead_params(config.camera)
-    m = depth_lib.camera_model(model)
-    fn = _pipeline(config.camera, config.candidates, config.noise)
-    depth, cands = fn(m, _geom_poses(model, poses), params, keys_noise, keys_cand)
+    if _renderer(config) == "native":
+        # MuJoCo's C ray caster: the same image as depth.render (tests compare them) with
+        # no compile per object; only the candidate sampler is jitted (once per shape).
+        depth, _ = depth_native.render_native(
+            config.camera, model, scene_lib.initial_data(model), params, poses,
+            scene_lib.scene_ids(model).object_qpos, keys_noise if config.noise else None)
+        cands = _sampler(config.candidates)(keys_cand, depth, params)
+    else:
+        m = depth_lib.camera_model(model)
+        fn = _pipeline(config.camera, config.candidates, config.noise)
+        depth, cands = fn(m, _geom_poses(model, poses), params, keys_noise, keys_cand)
     to_np = functools.partial(jax.tree.map, np.asarray)
     return poses, np.asarray(depth), to_np(params), to_np(cands)
 
@@ -280,8 +315,8 @@ def make_contexts(
       num_poses: P >= 1.
       config: camera, candidate and scene settings, depth noise on/off.
       model: optional scene of ``spec`` to reuse (``scene_model(spec, config)`` or a
-        ``scene.build_scene`` result); its qpos0 is overwritten with ``poses[0]``. None
-        builds one.
+        ``scene.build_scene`` result; not modified). None builds ``scene_model``. Its
+        qpos0 is no particular pose: give the simulator ``poses[i]`` as ``object_pose``.
 
     Returns:
       GraspContexts(model [shared], poses [P, 7], depth [P, H, W], camera, candidates
@@ -304,7 +339,6 @@ def make_contexts(
     else:
         scene_lib.scene_ids(model)  # raises if it is not a grasp scene
     poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config)
-    scene_lib.set_object_pose(model, poses[0])
     return GraspContexts(
         model=model, poses=poses, depth=depth, camera=camera, candidates=cands
     )

@@ -8,8 +8,10 @@ Measures, on the scene of one object (default ``small_box``):
   a figure that other load on a shared machine distorts less than wall-clock time);
 * depth images/s (``depth.make_renderer``) and candidate sets/s
   (``candidates.make_sampler``) at ``--depth-batch`` images;
-* a time split per stage (scene build, depth per image, candidates per set, one trial per
-  backend);
+* whole grasp contexts/s (``context.make_contexts``: resting poses, depth, candidates)
+  at ``--context-poses`` poses per call (different poses each call, one shared scene);
+* a time split per stage (first context incl. compiles, depth per image, candidates per
+  set, one context, one trial per backend);
 * optionally (``--agreement N``) the paired native-vs-MJX agreement of trial outcomes on
   N trials per object over ``--agreement-objects`` (one MJX compile per object shape).
 
@@ -24,6 +26,8 @@ import os
 import platform
 import sys
 import time
+
+__all__ = ["add_parser", "measure_agreement", "random_grasps", "run", "main"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -43,6 +47,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--mjx-batch", default="16,64", help="MJX batch sizes (csv); '' skips"
     )
     p.add_argument("--depth-batch", type=int, default=16, help="images per depth call")
+    p.add_argument(
+        "--context-poses",
+        default="16",
+        help="poses per context.make_contexts call for contexts/s (csv); '' skips",
+    )
     p.add_argument("--threads", type=int, default=None, help="native threads")
     p.add_argument("--repeats", type=int, default=2, help="timed calls per setting")
     p.add_argument(
@@ -59,7 +68,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--quick",
         action="store_true",
-        help="small sizes: native 32, MJX 8, depth 4, 1 repeat",
+        help="small sizes: native 32, MJX 8, depth 4, contexts 4, 1 repeat",
     )
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.set_defaults(func=run)
@@ -107,64 +116,8 @@ def _machine() -> dict:
     }
 
 
-def _centre_grasps(model, n):
-    """n grasps across the object's narrowest horizontal side at its centre."""
-    import numpy as np
-
-    from sern_jax.grasp import scene as scene_lib
-
-    data = scene_lib.initial_data(model)
-    ids = scene_lib.scene_ids(model)
-    centre = data.xipos[ids.object_body]
-    best = (np.inf, 0.0)
-    verts = _object_points(model, data, ids)
-    for th in np.linspace(-np.pi / 2, np.pi / 2, 36, endpoint=False):
-        u = np.array([np.cos(th), np.sin(th)])
-        w = np.ptp(verts[:, :2] @ u)
-        best = min(best, (w, th))
-    grasp = np.array([centre[0], centre[1], centre[2], best[1]])
-    return np.tile(grasp, (n, 1))
-
-
-def _object_points(model, data, ids):
-    """World points sampling the object's geoms (box corners, mesh vertices, ...)."""
-    import mujoco
-    import numpy as np
-
-    pts = []
-    for g in ids.object_geoms:
-        pos, mat = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
-        size, t = model.geom_size[g], model.geom_type[g]
-        if t == mujoco.mjtGeom.mjGEOM_MESH:
-            m = model.geom_dataid[g]
-            a, k = model.mesh_vertadr[m], model.mesh_vertnum[m]
-            local = model.mesh_vert[a : a + k]
-        elif t == mujoco.mjtGeom.mjGEOM_BOX:
-            local = (
-                np.array(
-                    [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-                )
-                * size
-            )
-        else:  # sphere / capsule: axis extremes
-            r = size[0]
-            h = size[1] if t == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
-            local = np.array(
-                [
-                    [r, 0, 0],
-                    [-r, 0, 0],
-                    [0, r, 0],
-                    [0, -r, 0],
-                    [0, 0, r + h],
-                    [0, 0, -r - h],
-                ]
-            )
-        pts.append(local @ mat.T + pos)
-    return np.concatenate(pts)
-
-
-def random_grasps(model, key, n):
-    """n grasps near the object: centre + U[±2 cm] in x, y, θ ~ U[-π/2, π/2)."""
+def random_grasps(key, model, n):
+    """n grasps near the object: centre + U[±2 cm] in x, y, θ ~ U[-π/2, π/2); key consumed."""
     import jax
     import numpy as np
 
@@ -210,7 +163,7 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
         model = scene_lib.build_scene(spec, seed=i)
         key = jax.random.fold_in(root, i)
         k_grasp, k_noise = jax.random.split(key)
-        grasps = random_grasps(model, k_grasp, trials_per_object)
+        grasps = random_grasps(k_grasp, model, trials_per_object)
         noise = sim.sample_noise(k_noise, trials_per_object)
         t0 = time.perf_counter()
         native = sim.GraspSimulator(model, "native").run_trials(grasps, noise)
@@ -235,6 +188,7 @@ def run(args) -> int:
     import jax
     import numpy as np
 
+    from sern_jax.grasp import context as context_lib
     from sern_jax.grasp import objects as objects_lib
     from sern_jax.grasp import scene as scene_lib
     from sern_jax.grasp import sim
@@ -245,6 +199,9 @@ def run(args) -> int:
         )
         mjx_batches = [8] if args.quick else _csv_ints(args.mjx_batch, "--mjx-batch")
         depth_batch = 4 if args.quick else args.depth_batch
+        context_poses = (
+            [4] if args.quick else _csv_ints(args.context_poses, "--context-poses")
+        )
         repeats = 1 if args.quick else args.repeats
         if depth_batch < 0 or repeats < 1:
             raise ValueError(
@@ -262,12 +219,14 @@ def run(args) -> int:
     out = {"benchmark": "grasp", "object": spec.name, "machine": _machine()}
     config = sim.TrialConfig()
     out["trial_steps"] = config.num_steps
-    t0 = time.perf_counter()
-    model = scene_lib.build_scene(spec, seed=0)
-    stages = {"scene_build_s": time.perf_counter() - t0}
-    out["timestep"] = float(model.opt.timestep)
     key = jax.random.key(0)
-    grasps_all = _centre_grasps(model, max(native_batches + mjx_batches + [1]))
+    t0 = time.perf_counter()
+    ctx = context_lib.make_context(key, spec)  # scene, resting pose, depth, candidates
+    model = ctx.model
+    stages = {"context_first_s": time.perf_counter() - t0}
+    out["timestep"] = float(model.opt.timestep)
+    grasp = scene_lib.centred_grasp(model)
+    grasps_all = np.tile(grasp, (max(native_batches + mjx_batches + [1]), 1))
 
     def time_backend(backend, batches, **kw):
         results, compile_s = [], None
@@ -322,7 +281,7 @@ def run(args) -> int:
         from sern_jax.grasp import depth as depth_lib
 
         cam = depth_lib.CameraConfig()
-        params = depth_lib.overhead_params(cam)
+        params = ctx.camera
         mx = depth_lib.camera_model(model)
         poses = depth_lib.geom_poses(scene_lib.initial_data(model))
         batch_poses = jax.tree.map(
@@ -360,6 +319,22 @@ def run(args) -> int:
         }
         stages["candidate_set_s"] = best / depth_batch
         log(f"cands  batch {depth_batch:6d}: {depth_batch / best:9.1f} sets/s")
+    # Whole contexts (scene poses + depth + candidates) per second, context.make_contexts.
+    if context_poses:
+        rows = []
+        for num in context_poses:
+            keys = [jax.random.fold_in(key, 1000 + r) for r in range(repeats + 1)]
+            call = iter(keys)
+            _, first, best = _first_and_best(
+                lambda: context_lib.make_contexts(next(call), spec, num, model=model),
+                repeats,
+            )
+            rows.append(
+                {"poses": num, "contexts_per_s": num / best, "first_call_s": first}
+            )
+            log(f"contexts P {num:6d}: {num / best:9.1f} contexts/s")
+        out["contexts"] = rows
+        stages["context_s"] = 1.0 / rows[-1]["contexts_per_s"]
     out["stages"] = stages
 
     if args.agreement:

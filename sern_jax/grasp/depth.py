@@ -50,6 +50,22 @@ import mujoco
 import numpy as np
 from sern_jax.grasp._mjx import mjx
 
+__all__ = [
+    "CameraConfig",
+    "CameraParams",
+    "GeomPoses",
+    "DepthImage",
+    "geom_poses",
+    "overhead_params",
+    "camera_model",
+    "ensure_material",
+    "pixel_rays",
+    "deproject",
+    "project",
+    "render",
+    "make_renderer",
+]
+
 _CYLINDER = int(mujoco.mjtGeom.mjGEOM_CYLINDER)
 _MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
 
@@ -507,7 +523,9 @@ def render(
             batched by the caller's vmap.
         d: mjx.Data after kinematics, or GeomPoses (only `geom_xpos`, `geom_xmat` are read).
         params: camera params.
-        key: optional PRNG key for sensor noise; consumed. None = noise-free.
+        key: optional PRNG key for sensor noise; consumed. None = noise-free. (The one
+            function of the package whose key is not its first traced argument: it is
+            optional, and noise-free callers pass none.)
 
     Returns:
         DepthImage with depth [H, W] and geom ids [H, W].
@@ -531,13 +549,14 @@ def make_renderer(config: CameraConfig, noise: bool = False):
         noise: whether the returned function takes keys and adds sensor noise.
 
     Returns:
-        fn(m, d, params[, keys]) -> DepthImage with leaves [B, H, W]; `d`, `params` (and keys)
-        carry a leading batch axis B, `m` is shared. To batch primitive sizes as well, vmap
-        `render` yourself with an in_axes tree for `m`.
+        fn(m, d, params) -> DepthImage with leaves [B, H, W], or with ``noise``
+        fn(keys, m, d, params) (keys first, as everywhere in the package); `d`, `params`
+        (and keys) carry a leading batch axis B, `m` is shared. To batch primitive sizes as
+        well, vmap `render` yourself with an in_axes tree for `m`.
     """
     if noise:
         batched = jax.vmap(
-            lambda m, d, p, k: render(config, m, d, p, k), (None, 0, 0, 0)
+            lambda k, m, d, p: render(config, m, d, p, k), (0, None, 0, 0)
         )
     else:
         batched = jax.vmap(lambda m, d, p: render(config, m, d, p), (None, 0, 0))

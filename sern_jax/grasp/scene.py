@@ -49,6 +49,26 @@ import numpy as np
 
 from sern_jax.grasp import objects as objects_lib
 
+__all__ = [
+    "FINGER_DROP",
+    "PAD_HALF",
+    "PARK_POS",
+    "GROUP_TABLE",
+    "GROUP_OBJECT",
+    "GROUP_GRIPPER",
+    "SceneConfig",
+    "SceneIds",
+    "scene_xml",
+    "scene_ids",
+    "resting_pose",
+    "build_scene",
+    "set_object_pose",
+    "object_pose",
+    "initial_data",
+    "object_points",
+    "centred_grasp",
+]
+
 FINGER_DROP = 0.06  # grasp centre below the palm origin, metres
 PAD_HALF = (0.005, 0.012, 0.02)  # pad half-sizes: thickness (x), width (y), height (z)
 PARK_POS = (0.0, 0.0, 1.0)  # palm parking position (x, y, z), out of view
@@ -345,8 +365,82 @@ def resting_pose(
     return pose
 
 
+_GEOM_NAMES = {
+    int(mujoco.mjtGeom.mjGEOM_BOX): "box",
+    int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule",
+    int(mujoco.mjtGeom.mjGEOM_MESH): "mesh",
+}
+
+
+def _geom_local_points(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """``objects.geom_points`` of compiled geom ``g`` (its own frame)."""
+    kind = _GEOM_NAMES.get(int(model.geom_type[g]))
+    if kind is None:
+        raise ValueError(f"geom {g} has type {model.geom_type[g]}, not one of {_GEOM_NAMES}")
+    verts = None
+    if kind == "mesh":
+        m = model.geom_dataid[g]
+        adr, num = model.mesh_vertadr[m], model.mesh_vertnum[m]
+        verts = model.mesh_vert[adr : adr + num]
+    return objects_lib.geom_points(kind, model.geom_size[g], verts)
+
+
+def object_points(model: mujoco.MjModel, data: mujoco.MjData | None = None) -> np.ndarray:
+    """World points of the object's geoms, ``[P, 3]`` (``objects.geom_points`` of each).
+
+    Args:
+      model: a grasp scene.
+      data: its state after kinematics; None = :func:`initial_data` (qpos0's pose).
+
+    Returns:
+      float64 ``[P, 3]``: box corners, mesh vertices, low-poly sphere/capsule samples.
+    """
+    if data is None:
+        data = initial_data(model)
+    pts = []
+    for g in scene_ids(model).object_geoms:
+        pos, mat = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+        pts.append(_geom_local_points(model, g) @ mat.T + pos)
+    return np.concatenate(pts)
+
+
+def centred_grasp(
+    model: mujoco.MjModel, pose: np.ndarray | None = None, num_angles: int = 72
+) -> np.ndarray:
+    """The grasp across the object's narrowest horizontal side, at its centre of mass.
+
+    θ minimises the horizontal width of :func:`object_points` over ``num_angles`` angles
+    in [-π/2, π/2); (x, y, z) is the object's centre of mass.
+
+    Args:
+      model: a grasp scene.
+      pose: optional [7] object pose (default: the pose in ``model.qpos0``).
+      num_angles: angles tried.
+
+    Returns:
+      grasp [4] = (x, y, z, θ), float64.
+    """
+    data = initial_data(model)
+    if pose is not None:
+        a = scene_ids(model).object_qpos
+        data.qpos[a : a + 7] = np.asarray(pose, np.float64)
+        mujoco.mj_kinematics(model, data)
+    ids = scene_ids(model)
+    pts = object_points(model, data)[:, :2]
+    best = min(
+        (float(np.ptp(pts @ [np.cos(t), np.sin(t)])), float(t))
+        for t in np.linspace(-np.pi / 2, np.pi / 2, num_angles, endpoint=False)
+    )
+    centre = data.xipos[ids.object_body]
+    return np.array([centre[0], centre[1], centre[2], best[1]])
+
+
 def _lowest_point(model, data, ids: SceneIds) -> float:
-    """Lowest world z of the object's geoms (exact for boxes/meshes/spheres/capsules)."""
+    """Lowest world z of the object's geoms: the support function along -z (exact for
+    boxes, spheres and capsules; the lowest vertex of ``objects.geom_points`` for meshes).
+    Boxes keep the closed form rather than the min over corners: the two differ by one
+    ulp, and a drop height one ulp off changes the simulated resting pose."""
     lowest = np.inf
     for g in ids.object_geoms:
         pos, mat = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
@@ -357,11 +451,8 @@ def _lowest_point(model, data, ids: SceneIds) -> float:
             z = pos[2] - abs(mat[2, 2]) * size[1] - size[0]
         elif t == mujoco.mjtGeom.mjGEOM_BOX:
             z = pos[2] - np.abs(mat[2, :]) @ size
-        else:  # mesh
-            m = model.geom_dataid[g]
-            adr, num = model.mesh_vertadr[m], model.mesh_vertnum[m]
-            verts = model.mesh_vert[adr : adr + num]
-            z = (verts @ mat.T + pos)[:, 2].min()
+        else:  # mesh: its lowest vertex
+            z = (_geom_local_points(model, g) @ mat.T + pos)[:, 2].min()
         lowest = min(lowest, float(z))
     return lowest
 

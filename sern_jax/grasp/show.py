@@ -24,6 +24,12 @@ import os
 import sys
 import time
 
+__all__ = ["TRIAL_STREAM", "add_parser", "run"]
+
+# fold_in id of the trials' key under the root key; the context (make_context(root, ...))
+# uses context.POSE_STREAM, DEPTH_NOISE_STREAM and CANDIDATE_STREAM (0, 1, 2).
+TRIAL_STREAM = 3
+
 _DESCRIPTION = """\
 Pictures of one grasp context: an object at a random resting pose on the table, the
 overhead depth image with its 64 antipodal grasp candidates drawn as gripper jaws and
@@ -242,9 +248,7 @@ def run(args) -> int:
     import numpy as np
 
     from sern_jax import io
-    from sern_jax.grasp import candidates as cand_lib
-    from sern_jax.grasp import depth as depth_lib
-    from sern_jax.grasp import scene as scene_lib
+    from sern_jax.grasp import context as context_lib
     from sern_jax.grasp import sim as sim_lib
 
     safe_name = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name)
@@ -253,37 +257,15 @@ def run(args) -> int:
         os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out))
     )
     root = jax.random.key(args.seed)
-    key_noise, key_cand, key_trials = (jax.random.fold_in(root, i) for i in range(3))
+    key_trials = jax.random.fold_in(root, TRIAL_STREAM)
     timings = {}
 
     t = time.perf_counter()
-    model = scene_lib.build_scene(spec, seed=args.seed)
-    data = scene_lib.initial_data(model)
-    timings["scene_s"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    camera = depth_lib.CameraConfig()
-    params = depth_lib.overhead_params(camera)
-    render = jax.jit(lambda m, d, p, k: depth_lib.render(camera, m, d, p, k))
-    render_clean = jax.jit(lambda m, d, p: depth_lib.render(camera, m, d, p))
-    m = depth_lib.camera_model(model)
-    poses = depth_lib.geom_poses(data)
-    image = (
-        render(m, poses, params, key_noise)
-        if args.noise
-        else render_clean(m, poses, params)
-    )
-    depth = np.asarray(image.depth)
-    timings["depth_s"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    cand_config = cand_lib.CandidateConfig()
-    cands = jax.jit(lambda k, d, p: cand_lib.sample(cand_config, k, d, p))(
-        key_cand, image.depth, params
-    )
-    cands = jax.tree.map(np.asarray, cands)
+    config = context_lib.ContextConfig(noise=bool(args.noise))
+    ctx = context_lib.make_context(root, spec, config)
+    model, depth, cands = ctx.model, ctx.depth, ctx.candidates
     valid = cands.valid
-    timings["candidates_s"] = time.perf_counter() - t
+    timings["context_s"] = time.perf_counter() - t
     print(f"{spec.name}: {int(valid.sum())}/{len(valid)} valid candidates", flush=True)
 
     prob = valid.astype(np.float64)
@@ -339,7 +321,7 @@ def run(args) -> int:
     io.save_npz(
         run_dir / "results.npz",
         depth=depth,
-        geom=np.asarray(image.geom),
+        pose=ctx.pose,
         grasps=cands.grasps,
         valid=valid,
         width=cands.width,
@@ -357,8 +339,9 @@ def run(args) -> int:
             "trials": args.trials,
             "backend": backend,
             "noise": bool(args.noise),
-            "camera": camera,
-            "candidates": cand_config,
+            "pose": ctx.pose,
+            "camera": config.camera,
+            "candidates": config.candidates,
             "mujoco_gl": os.environ.get("MUJOCO_GL"),
         },
     )

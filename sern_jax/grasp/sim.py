@@ -33,9 +33,15 @@ Randomisation (why outcomes are Bernoulli), drawn per trial by :func:`sample_noi
 Backends, one interface (:class:`GraspSimulator`):
 
 * ``"native"``: MuJoCo C via ``mujoco.rollout`` (multi-threaded); the fast CPU path.
-* ``"mjx"``: MuJoCo MJX, ``jit(vmap(scan(mjx.step)))``; the GPU path. The ``mjx.Model``
-  is an argument, so scenes of the same structure share one compiled program; batches
-  are padded to the next power of two, so each power of two compiles once.
+* ``"mjx"``: MuJoCo MJX, ``jit(vmap(execute))`` with ``execute = make_execute(config,
+  model)`` the pure, unbatched trial ``execute(mx, pose, grasp, trial_params) ->
+  TrialOutcome`` (a ``lax.scan`` of ``mjx.step``); the GPU path, and the function to vmap
+  or jit inside your own program. The ``mjx.Model`` is an argument, so scenes of the same
+  structure share one compiled program; batches are padded to the next power of two, so
+  each power of two compiles once.
+
+Every trial can start from its own object pose (``run_trials(..., object_pose=[N, 7])``,
+e.g. the poses of ``context.make_contexts`` on their shared model).
 
 Every :class:`TrialResult` / :class:`SuccessEstimate` records its ``backend``.
 """
@@ -56,6 +62,27 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from sern_jax.grasp import scene as scene_lib
+
+__all__ = [
+    "BACKENDS",
+    "GRASP_XY_LIMIT",
+    "GRASP_Z_RANGE",
+    "MIN_GRASP_Z",
+    "QPOS_LIMIT",
+    "QVEL_LIMIT",
+    "TrialConfig",
+    "TrialNoise",
+    "TrialResult",
+    "TrialOutcome",
+    "SuccessEstimate",
+    "check_grasps",
+    "sample_trial_noise",
+    "sample_noise",
+    "zero_noise",
+    "make_execute",
+    "GraspSimulator",
+    "agreement",
+]
 
 BACKENDS = ("native", "mjx")
 GRASP_XY_LIMIT = 0.5  # |x|, |y| of a grasp must lie on the 1 m table
@@ -139,7 +166,7 @@ class TrialConfig:
 
 
 class TrialNoise(NamedTuple):
-    """Per-trial randomisation (N trials)."""
+    """Per-trial randomisation: N trials, or one ([] / [4]: make_execute's trial_params)."""
 
     friction: np.ndarray  # [N] object sliding friction
     mass_scale: np.ndarray  # [N] object mass/inertia scale
@@ -203,6 +230,30 @@ def check_grasps(grasps) -> np.ndarray:
 # ----------------------------------------------------------------------------- noise
 
 
+def sample_trial_noise(key: jax.Array, config: TrialConfig = TrialConfig()) -> TrialNoise:
+    """One trial's randomisation (pure; jit and vmap it): the ``trial_params`` of
+    :func:`make_execute`.
+
+    Args:
+      key: jax.random key (consumed).
+      config: ranges.
+
+    Returns:
+      TrialNoise of jax scalars friction, mass_scale and a [4] grasp_error.
+    """
+    c = config
+    sigma = jnp.array([c.pos_noise_std] * 3 + [c.yaw_noise_std])
+    key_fric, key_mass, key_err = jax.random.split(key, 3)
+    fric = jax.random.uniform(
+        key_fric, (), minval=c.friction_range[0], maxval=c.friction_range[1]
+    )
+    mass = jax.random.uniform(
+        key_mass, (), minval=c.mass_scale_range[0], maxval=c.mass_scale_range[1]
+    )
+    err = jax.random.truncated_normal(key_err, -2.5, 2.5, (4,)) * sigma
+    return TrialNoise(fric, mass, err)
+
+
 def sample_noise(
     key: jax.Array, num_trials: int, config: TrialConfig = TrialConfig()
 ) -> TrialNoise:
@@ -214,34 +265,21 @@ def sample_noise(
       config: ranges.
 
     Returns:
-      TrialNoise with numpy arrays [N], [N], [N, 4].
+      TrialNoise with numpy arrays [N], [N], [N, 4]; trial i is
+      ``sample_trial_noise(fold_in(key, i), config)``.
     """
+    if isinstance(num_trials, bool) or not isinstance(num_trials, (int, np.integer)):
+        raise ValueError(f"num_trials must be an int >= 1, got {num_trials!r}")
     if num_trials < 1:
         raise ValueError(f"num_trials must be >= 1, got {num_trials}")
-    c = config
-    sigma = jnp.array([c.pos_noise_std] * 3 + [c.yaw_noise_std])
-
-    def one(i):
-        k_fric, k_mass, k_err = jax.random.split(jax.random.fold_in(key, i), 3)
-        fric = jax.random.uniform(
-            k_fric, (), minval=c.friction_range[0], maxval=c.friction_range[1]
-        )
-        mass = jax.random.uniform(
-            k_mass, (), minval=c.mass_scale_range[0], maxval=c.mass_scale_range[1]
-        )
-        err = jax.random.truncated_normal(k_err, -2.5, 2.5, (4,)) * sigma
-        return fric, mass, err
-
-    fric, mass, err = _sample_noise_jit(one, num_trials)
+    fric, mass, err = jax.vmap(
+        lambda i: sample_trial_noise(jax.random.fold_in(key, i), config)
+    )(jnp.arange(num_trials))
     return TrialNoise(
         np.asarray(fric, np.float64),
         np.asarray(mass, np.float64),
         np.asarray(err, np.float64),
     )
-
-
-def _sample_noise_jit(one, num_trials):
-    return jax.vmap(one)(jnp.arange(num_trials))
 
 
 def zero_noise(num_trials: int, friction: float = 0.8) -> TrialNoise:
@@ -405,26 +443,74 @@ class _NativeRunner:
 # ----------------------------------------------------------------------------- mjx
 
 
+class TrialOutcome(NamedTuple):
+    """Outcome of one trial from :func:`make_execute` (leading axes when vmapped)."""
+
+    success: jax.Array  # [] bool: finite, rose >= success_lift, jaws not closed on nothing
+    finite: jax.Array  # [] bool: every step stayed finite and within the limits
+    rise: jax.Array  # [] object z rise at the end, metres (meaningless when not finite)
+    gap: jax.Array  # [] final distance between the pads' inner faces, metres
+
+
+def make_execute(config: TrialConfig, model: mujoco.MjModel):
+    """A pure, unbatched MJX grasp trial for scenes shaped like ``model``.
+
+    The scene's structure (indices, finger range, timestep) is read from ``model`` on the
+    host; everything else is an argument, so one ``execute`` (and one compiled program)
+    serves every scene of the same structure. ``jax.vmap`` it over poses, grasps and
+    trial params (``GraspSimulator``'s MJX backend is ``jit(vmap(execute))``).
+
+    Args:
+      config: trial schedule and success rule.
+      model: a grasp scene (``scene.build_scene`` / ``context.scene_model``).
+
+    Returns:
+      ``execute(mx, pose, grasp, trial_params) -> TrialOutcome`` where ``mx`` is
+      ``mjx.put_model(model)`` (or a scene of the same structure), ``pose`` [7] the
+      object's start pose (x, y, z, qw, qx, qy, qz), ``grasp`` [4] the commanded grasp
+      (x, y, z, θ) and ``trial_params`` a :class:`TrialNoise` of scalars (friction,
+      mass_scale) and a [4] grasp error (one draw of :func:`sample_trial_noise`). Pure:
+      jit and vmap it.
+    """
+    if not isinstance(config, TrialConfig):
+        raise ValueError(f"config must be a TrialConfig, got {type(config).__name__}")
+    if not isinstance(model, mujoco.MjModel):
+        raise ValueError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
+    ids = scene_lib.scene_ids(model)
+    return _make_execute(
+        ids, config, _half_open(model, ids), float(model.opt.timestep)
+    )
+
+
 @functools.lru_cache(maxsize=16)
-def _mjx_program(
+def _make_execute(
     ids: scene_lib.SceneIds, config: TrialConfig, half_open: float, timestep: float
 ):
-    """Jitted batched trial for scenes with these indices and this schedule."""
+    """make_execute's function, one per static structure (so jit caches are shared)."""
     from sern_jax.grasp._mjx import mjx
 
-    obj_geoms = jnp.asarray(ids.object_geoms)
-    palm_idx = jnp.asarray(ids.palm_qpos + ids.finger_qpos)
+    obj_geoms = np.asarray(ids.object_geoms)
+    palm_idx = np.asarray(ids.palm_qpos + ids.finger_qpos)
     body, qa = ids.object_body, ids.object_qpos
 
-    def trial(mx, qpos0, grasp, friction, mass_scale, grasp_error):
-        palm0, ctrl = _schedule(jnp, grasp + grasp_error, config, half_open, timestep)
-        m = mx.replace(
-            geom_friction=mx.geom_friction.at[obj_geoms, 0].set(friction),
-            body_mass=mx.body_mass.at[body].multiply(mass_scale),
-            body_inertia=mx.body_inertia.at[body].multiply(mass_scale),
+    def execute(mx, pose, grasp, trial_params: TrialNoise) -> TrialOutcome:
+        # MJX's own code relies on NumPy rank promotion (mjx/_src/smooth.py), so it is
+        # allowed here even when the caller sets jax_numpy_rank_promotion="raise".
+        with jax.numpy_rank_promotion("allow"):
+            return _execute(mx, pose, grasp, trial_params)
+
+    def _execute(mx, pose, grasp, trial_params):
+        palm0, ctrl = _schedule(
+            jnp, grasp + trial_params.grasp_error, config, half_open, timestep
         )
+        m = mx.replace(
+            geom_friction=mx.geom_friction.at[obj_geoms, 0].set(trial_params.friction),
+            body_mass=mx.body_mass.at[body].multiply(trial_params.mass_scale),
+            body_inertia=mx.body_inertia.at[body].multiply(trial_params.mass_scale),
+        )
+        qpos0 = mx.qpos0.at[qa : qa + 7].set(pose).at[palm_idx].set(palm0)
         d = mjx.make_data(m)
-        d = d.replace(qpos=qpos0.at[palm_idx].set(palm0), ctrl=ctrl[0])
+        d = d.replace(qpos=qpos0, ctrl=ctrl[0])
 
         def step(carry, ctrl_t):
             d, finite = carry
@@ -439,63 +525,57 @@ def _mjx_program(
         (d, finite), _ = jax.lax.scan(step, (d, jnp.array(True)), ctrl)
         rise = d.qpos[qa + 2] - qpos0[qa + 2]
         gap = d.qpos[ids.finger_qpos[0]] + d.qpos[ids.finger_qpos[1]]
-        return finite, rise, gap
+        success = finite & (rise >= config.success_lift) & (gap > 0.002)
+        return TrialOutcome(success=success, finite=finite, rise=rise, gap=gap)
 
-    batched = jax.vmap(trial, in_axes=(None, 0, 0, 0, 0, 0))
-    return jax.jit(batched)
+    return execute
+
+
+@functools.lru_cache(maxsize=16)
+def _batched_execute(execute):
+    """jit(vmap(execute)) over poses, grasps and trial params; the model is shared."""
+    return jax.jit(jax.vmap(execute, in_axes=(None, 0, 0, 0)))
 
 
 class _MjxRunner:
+    """MJX backend: ``jit(vmap(make_execute(...)))`` over trials, batches padded to 2^k."""
+
     def __init__(self, model, config):
         from sern_jax.grasp._mjx import mjx
 
         self.model, self.config = model, config
         self.ids = scene_lib.scene_ids(model)
         self.mx = mjx.put_model(model)
-        self.half_open = _half_open(model, self.ids)
-        self.program = _mjx_program(
-            self.ids, config, self.half_open, float(model.opt.timestep)
-        )
-        data = scene_lib.initial_data(model)
-        self.qpos0 = data.qpos.copy()
+        self.program = _batched_execute(make_execute(config, model))
+        self.pose0 = scene_lib.object_pose(model)
 
     def __call__(self, grasps, noise, object_pose):
         n = len(grasps)
-        qpos0 = np.tile(self.qpos0, (n, 1)).astype(np.float32)
-        if object_pose is not None:
-            a = self.ids.object_qpos
-            qpos0[:, a : a + 7] = object_pose
+        poses = np.tile(self.pose0, (n, 1)) if object_pose is None else object_pose
         # Pad the batch to the next power of two (repeating trial 0, results dropped)
         # so that varying numbers of valid candidates reuse a few compiled programs.
         n_pad = 1 << max(n - 1, 0).bit_length()
         pad = np.concatenate([np.arange(n), np.zeros(n_pad - n, np.int64)])
-        noise = TrialNoise(*(a[pad] for a in noise))
-        # MJX's own code relies on NumPy rank promotion (mjx/_src/smooth.py), so it is
-        # allowed here even when the caller sets jax_numpy_rank_promotion="raise".
+        f32 = functools.partial(jnp.asarray, dtype=jnp.float32)
+        params = TrialNoise(*(f32(a[pad]) for a in noise))
         with jax.numpy_rank_promotion("allow"):
-            finite, rise, gap = self._call(qpos0[pad], grasps[pad], noise)
-        nan = ~np.asarray(finite)[:n]
-        rise = np.where(nan, np.nan, np.asarray(rise, np.float64)[:n])
-        gap = np.asarray(gap, np.float64)[:n]
+            out = self.program(self.mx, f32(poses[pad]), f32(grasps[pad]), params)
+        nan = ~np.asarray(out.finite)[:n]
+        rise = np.where(nan, np.nan, np.asarray(out.rise, np.float64)[:n])
+        gap = np.asarray(out.gap, np.float64)[:n]
+        # Decided here in float64, as the native backend does (out.success is the same
+        # rule in float32).
         success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
         return TrialResult(success, nan, rise, gap, "mjx")
-
-    def _call(self, qpos0, grasps, noise):
-        return self.program(
-            self.mx,
-            jnp.asarray(qpos0),
-            jnp.asarray(grasps, jnp.float32),
-            jnp.asarray(noise.friction, jnp.float32),
-            jnp.asarray(noise.mass_scale, jnp.float32),
-            jnp.asarray(noise.grasp_error, jnp.float32),
-        )
 
 
 # ----------------------------------------------------------------------------- interface
 
 
 class GraspSimulator:
-    """Runs grasp trials on one scene with one backend.
+    """Runs grasp trials on one scene with one backend: a thin host-side wrapper that
+    checks inputs and hands them to the native (``mujoco.rollout``) or MJX
+    (``jit(vmap(make_execute(...)))``) backend.
 
     Args:
       model: a scene from ``scene.build_scene`` (its ``qpos0`` is the resting pose).

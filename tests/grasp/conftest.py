@@ -21,17 +21,7 @@ def box_model():
 @pytest.fixture(scope="session")
 def centred_grasp(box_model):
     """The grasp across the small box's narrowest horizontal side, at its centre."""
-    model = box_model
-    data = scene.initial_data(model)
-    ids = scene.scene_ids(model)
-    rot = data.xmat[ids.object_body].reshape(3, 3)
-    half = model.geom_size[ids.object_geoms[0]]
-    best = min(
-        (float(np.abs(rot.T @ [np.cos(t), np.sin(t), 0.0]) @ half), t)
-        for t in np.linspace(-np.pi / 2, np.pi / 2, 72, endpoint=False)
-    )
-    centre = data.xipos[ids.object_body]
-    return np.array([centre[0], centre[1], centre[2], best[1]])
+    return scene.centred_grasp(box_model)
 
 
 @pytest.fixture(scope="session")

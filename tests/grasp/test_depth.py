@@ -233,7 +233,7 @@ def test_noise_is_keyed(scene, batched_render):
     params = jax.tree.map(lambda x: jnp.stack([x] * 4), dp.overhead_params(_SMALL))
     keys = jax.random.split(jax.random.key(0), 4)
     keys = keys.at[1].set(keys[0])  # images 0 and 1 share a key
-    noisy = dp.make_renderer(_SMALL, noise=True)(m, poses, params, keys)
+    noisy = dp.make_renderer(_SMALL, noise=True)(keys, m, poses, params)
     clean = batched_render(m, poses, params)
     depth = np.asarray(noisy.depth)
     np.testing.assert_array_equal(depth[0], depth[1])

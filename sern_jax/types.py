@@ -6,7 +6,7 @@ Legend for shapes in docstrings: ``S`` seeds, ``T`` horizon, ``G`` checkpoints, 
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple, Protocol
+from typing import Any, Callable, NamedTuple, Protocol, runtime_checkable
 
 import jax
 
@@ -26,12 +26,15 @@ class Network(NamedTuple):
     apply: Callable[..., Any]
 
 
+@runtime_checkable
 class Environment(Protocol):
     """A contextual bandit as a gymnax-style pure environment.
 
     ``reset(key, params) -> (obs, state)`` draws a context; ``step(key, state, action, params)
     -> (reward, state)`` draws the reward of ``action`` in that context. Both are pure and
-    unbatched (vmap at the call site); ``key`` is consumed.
+    unbatched (vmap at the call site); ``key`` is consumed. ``isinstance(env, Environment)``
+    checks that the two methods exist. Implementations: ``bandit_env.BanditEnv`` (params = a
+    ``problems.Problem``: K-armed and finite-context Bernoulli bandits, no MuJoCo).
     """
 
     def reset(self, key: Key, params: Params) -> tuple[Any, Any]: ...

@@ -1,0 +1,55 @@
+"""The hard set: every object builds, rests, and gives a usable candidate set.
+
+Fast checks only (no grasp trials): the success-probability screen is
+``experiments/hard_objects.py``.
+"""
+
+import jax
+import numpy as np
+import pytest
+
+from experiments import hard_objects as screen
+from sern_jax.grasp import objects, scene
+
+HARD = objects.hard_object_names()
+
+
+def test_names_unique_and_known():
+    names = objects.object_names()
+    assert len(set(names)) == len(names)
+    assert len(set(HARD)) == len(HARD) >= 9
+    for name in HARD:
+        spec = objects.make_object(name)
+        assert spec.name == name and spec.category == "hard"
+
+
+@pytest.mark.parametrize("name", HARD)
+def test_hard_object_limits(name):
+    spec = objects.make_object(name)
+    assert max(spec.extents) <= 0.11  # the 10 cm class
+    assert min(spec.extents) >= 0.02
+    assert objects.MIN_MASS_KG <= spec.mass <= objects.MAX_MASS_KG
+    for g in spec.geoms:
+        assert len(g.vertices) <= 32
+
+
+@pytest.fixture(scope="module")
+def pipeline():
+    return screen._pipeline()
+
+
+@pytest.mark.parametrize("name", HARD)
+def test_rests_and_has_candidates(name, pipeline):
+    spec = objects.make_object(name)
+    model, cands = screen.context(spec, 0, jax.random.key(0), pipeline)
+    pose = scene.object_pose(model)
+    assert np.all(np.isfinite(pose))
+    assert 0.0 < pose[2] < 0.08  # on the table, not fallen through or flung away
+    # build_scene raises unless the dropped object came to rest; here it also touches
+    # the table at its stored pose (a contact between an object geom and the plane).
+    data = scene.initial_data(model)
+    ids = scene.scene_ids(model)
+    obj = set(int(g) for g in ids.object_geoms)
+    pairs = {(int(c.geom1), int(c.geom2)) for c in data.contact[: data.ncon]}
+    assert any((a in obj) != (b in obj) for a, b in pairs), "object not on the table"
+    assert int(np.sum(cands.valid)) >= 8

@@ -368,8 +368,8 @@ def standardize(x) -> jax.Array:
 
 @jax.jit
 def _standardize(x):
-    mean = jnp.mean(x, axis=0)
-    std = jnp.std(x, axis=0)
+    mean = jnp.mean(x, axis=0, keepdims=True)
+    std = jnp.std(x, axis=0, keepdims=True)
     return (x - mean) / jnp.where(std > 0, std, 1.0)
 
 

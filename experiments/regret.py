@@ -200,9 +200,16 @@ def fit_slope(t: np.ndarray, curves: np.ndarray, t_min: float, num_boot: int = 2
 
 
 def summarise(exp: RegretExperiment, merged: dict) -> dict:
-    """Per policy: final regret (mean, 95% CI, both definitions) and the fitted log–log slope."""
+    """Per policy: final regret (mean, 95% CI, both definitions) and the fitted log–log slope;
+    and SERN's α(T) with Theorem 1's c = e^{-1/α}/K and the exact π_min (``theorem1``)."""
+    from sern_jax import schedules, theory
+
     t = merged["t"].astype(np.float64)
-    out = {"horizon": exp.horizon, "num_seeds": exp.num_seeds, "policies": {}}
+    alpha = float(schedules.alpha_of_horizon(exp.schedule, exp.horizon, exp.alpha0, exp.p))
+    out = {"horizon": exp.horizon, "num_seeds": exp.num_seeds, "policies": {},
+           # SERN's exploration floor for the figure (figures read results, never recompute)
+           "theorem1": {"alpha": alpha, "c": float(theory.thm1_c(alpha, exp.num_arms)),
+                        "pi_min": float(theory.thm1_pi_min(alpha, exp.num_arms))}}
     for policy in exp.policies:
         reg = merged[f"{policy}__regret_rb"].astype(np.float64)
         final = reg[:, -1]

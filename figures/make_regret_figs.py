@@ -1,4 +1,5 @@
-"""Regret figures from a saved run directory (reads results only; no numerics beyond means).
+"""Regret figures from a saved run directory (reads results only; no numerics beyond means:
+α(T), Theorem 1's c and π_min come from the run's summary.json).
 
 Usage: ``python -m figures.make_regret_figs RUN_DIR`` (``sern regret`` calls it for you).
 """
@@ -61,14 +62,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         counts = res["softmax__counts"].astype(float)  # [S, G, K]
         frac = counts.mean(0) / t[:, None]  # [G, K]
         k = counts.shape[-1]
-        if cfg["schedule"] == "constant":
-            alpha = cfg["alpha0"]
-        elif cfg["schedule"] == "log":
-            alpha = cfg["alpha0"] / (cfg["p"] * np.log(cfg["horizon"]))
-        else:
-            alpha = cfg["alpha0"] / (1 + cfg["alpha0"] * cfg["p"] * np.log(cfg["horizon"]))
-        c = np.exp(-1.0 / alpha) / k
-        pi_min = 1.0 / (1.0 + (k - 1) * np.exp(1.0 / alpha))
+        floor = summary.get("theorem1")  # saved by experiments/regret.py (absent in old runs)
         fig, ax = plt.subplots(figsize=(7, 5))
         means = res["means"].reshape(-1, k).mean(0)
         order = np.argsort(-means)
@@ -76,13 +70,17 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         for rank, a in enumerate(order):
             ax.plot(t, np.maximum(frac[:, a], 1e-12), color=cmap(rank / max(k - 1, 1)), lw=1,
                     label=f"arm {a} (r={means[a]:.2f})" if k <= 12 else None)
-        ax.axhline(c, color="r", ls="--", label=f"Theorem 1 floor c = e^(-1/α)/K = {c:.2e}")
-        ax.axhline(pi_min, color="m", ls=":", label=f"exact π_min = {pi_min:.2e}")
+        if floor is not None:
+            c, pi_min = floor["c"], floor["pi_min"]
+            ax.axhline(c, color="r", ls="--",
+                       label=f"Theorem 1 floor c = e^(-1/α)/K = {c:.2e}")
+            ax.axhline(pi_min, color="m", ls=":", label=f"exact π_min = {pi_min:.2e}")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("round t")
         ax.set_ylabel("E[N_a(t)] / t (mean over seeds)")
-        ax.set_title(f"SERN softmax exploration, α = {alpha:.3g}")
+        ax.set_title("SERN softmax exploration"
+                     + (f", α = {floor['alpha']:.3g}" if floor is not None else ""))
         ax.legend(fontsize=7)
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()

@@ -9,12 +9,11 @@ feasible T, so it says nothing.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from proofs_check import common
 from proofs_check import framework as fw
+from sern_jax import theory as th
 
 ALPHA = 0.05
 NUM_ARMS = 64
@@ -46,7 +45,7 @@ def simulate(ctx):
 def evaluate(data, ctx):
     r = means()
     limit = exact_limit(r, ALPHA)
-    c = math.exp(-1.0 / ALPHA) / NUM_ARMS
+    c = float(th.thm1_c(ALPHA, NUM_ARMS))
     ts = data["ts"]
     cells = [fw.exact_cell("exact oracle: lim_T R_T/T = Σ_a π_a Δ_a vs 0 (Thm 5)", limit,
                            limit if ctx.mutate else 0.0, "le",

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from proofs_check import framework as fw
+from sern_jax import schedules
 from sern_jax import theory as th
 
 ALPHA0 = (0.1, 0.5, 0.9, 1.0, 2.0)
@@ -22,7 +23,8 @@ def simulate(ctx):
             for K in KS:
                 lr = th.thm4_c_log_ratio(log_t, K, a0, p)
                 # mutation: Theorem 1's own c = T^{-p/alpha0}/K in place of c0 T^{-p}/K
-                lr_t1 = th.thm1_log_pi_min(a0 / (p * log_t), K) - (-(p / a0) * log_t - math.log(K))
+                alpha = schedules.alpha_of_log_horizon("log", log_t, a0, p)
+                lr_t1 = th.thm1_log_pi_min(alpha, K) - th.thm1_log_c(alpha, K)
                 i = int(np.argmin(lr))
                 neg = np.nonzero(lr < 0)[0]
                 rows.append(dict(alpha0=a0, p=p, K=K, min_log10=float(lr[i] / th.LN10),

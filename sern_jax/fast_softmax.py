@@ -43,7 +43,6 @@ agree, see the tests). For smaller α the outputs are NaN (a loud refusal; use
 
 from __future__ import annotations
 
-import math
 from typing import Callable, NamedTuple
 
 import jax
@@ -55,8 +54,8 @@ from sern_jax import schedules
 from sern_jax import simulate as sim
 from sern_jax.types import Array, Key
 
-__all__ = ["supports", "min_alpha", "make_fast_run", "make_batched", "threefry2x32",
-           "DEFAULT_BLOCK", "DEFAULT_CPU_CHUNK"]
+__all__ = ["supports", "min_alpha", "make_fast_run", "make_batched", "chunk_layout",
+           "threefry2x32", "DEFAULT_BLOCK", "DEFAULT_CPU_CHUNK"]
 
 DEFAULT_BLOCK = 64  # rounds between exact recomputations of the prefix sums
 DEFAULT_CPU_CHUNK = 256  # seeds per lax.map step on CPU: the state stays in L2
@@ -90,14 +89,7 @@ def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool
           and str(jax.config.jax_default_prng_impl) == "threefry2x32")
     if not ok or params is None:
         return ok
-    alpha0 = np.asarray(params.alpha0, np.float64)
-    p = np.asarray(params.p, np.float64)
-    if config.schedule == "constant":
-        alpha = alpha0
-    elif config.schedule == "log":
-        alpha = alpha0 / (p * math.log(config.horizon))
-    else:
-        alpha = alpha0 / (1.0 + alpha0 * p * math.log(config.horizon))
+    alpha = schedules.alpha_of_horizon(config.schedule, config.horizon, params.alpha0, params.p)
     return bool(np.all(alpha >= min_alpha(config.dtype)))
 
 

@@ -8,17 +8,36 @@ schedule *kind* is static.
   Depends on the horizon T only, so it is constant within a run.
 * ``theorem4``: α = α0 / (1 + α0 p ln T), the schedule for which Theorem 1's
   ``e^{-1/α}/K`` equals Theorem 4's ``c0 T^{-p}/K`` with ``c0 = e^{-1/α0}`` (audit §3.1).
+
+This module is the one place these formulas are written: :func:`alpha_t` inside traced code,
+:func:`alpha_of_horizon` / :func:`alpha_of_log_horizon` on the host (float64 numpy: the fast
+runner's α check, the theory checks, the regret experiment's saved Theorem 1 floor).
 """
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
+import numpy as np
 
 from sern_jax.types import Array
 
-__all__ = ["SCHEDULE_NAMES", "alpha_t", "validate_schedule"]
+__all__ = ["SCHEDULE_NAMES", "alpha_t", "alpha_of_horizon", "alpha_of_log_horizon",
+           "validate_schedule"]
 
 SCHEDULE_NAMES = ("constant", "log", "theorem4")
+
+
+def _alpha(kind: str, log_t, alpha0, p):
+    """α from ln T; plain arithmetic, so it serves jnp (traced) and numpy (host) alike."""
+    if kind == "constant":
+        return alpha0
+    if kind == "log":
+        return alpha0 / (p * log_t)
+    if kind == "theorem4":
+        return alpha0 / (1.0 + alpha0 * p * log_t)
+    raise ValueError(f"unknown schedule {kind!r}; choose one of {SCHEDULE_NAMES}")
 
 
 def alpha_t(kind: str, t: Array, horizon: int, alpha0: Array, p: Array) -> Array:
@@ -37,18 +56,35 @@ def alpha_t(kind: str, t: Array, horizon: int, alpha0: Array, p: Array) -> Array
     del t
     if kind == "constant":
         return alpha0
-    log_t = jnp.log(jnp.asarray(horizon, dtype=jnp.result_type(alpha0)))
-    if kind == "log":
-        return alpha0 / (p * log_t)
-    if kind == "theorem4":
-        return alpha0 / (1.0 + alpha0 * p * log_t)
-    raise ValueError(f"unknown schedule {kind!r}; choose one of {SCHEDULE_NAMES}")
+    return _alpha(kind, jnp.log(jnp.asarray(horizon, dtype=jnp.result_type(alpha0))), alpha0, p)
+
+
+def alpha_of_log_horizon(kind: str, log_t, alpha0, p) -> np.ndarray:
+    """Host-side α(T) from ``log_t = ln T`` in float64 (horizons past float range, e.g. 10^80).
+
+    Args:
+      kind: one of :data:`SCHEDULE_NAMES`.
+      log_t: ln T (any shape; broadcasts with ``alpha0`` and ``p``).
+      alpha0: α0 > 0.
+      p: exponent p > 0 (``log`` and ``theorem4`` only).
+
+    Returns:
+      float64 array of α (the same formula as :func:`alpha_t`).
+    """
+    f64 = lambda x: np.asarray(x, dtype=np.float64)  # noqa: E731
+    return f64(_alpha(kind, f64(log_t), f64(alpha0), f64(p)))
+
+
+def alpha_of_horizon(kind: str, horizon, alpha0, p) -> np.ndarray:
+    """Host-side α(T) for horizon ``T`` in float64: α0 (constant), α0/ln(T^p) (log),
+    α0/(1 + α0 p ln T) (theorem4). See :func:`alpha_of_log_horizon`. ``ln T`` is ``math.log``
+    per element (correctly rounded libm, the value the theory checks always used)."""
+    log_t = np.vectorize(math.log, otypes=[np.float64])(np.asarray(horizon, dtype=np.float64))
+    return alpha_of_log_horizon(kind, log_t, alpha0, p)
 
 
 def validate_schedule(kind: str, horizon: int, alpha0, p) -> None:
     """Raises ``ValueError`` naming the bad value (host-side, before any compile)."""
-    import numpy as np
-
     if kind not in SCHEDULE_NAMES:
         raise ValueError(f"unknown schedule {kind!r}; choose one of {SCHEDULE_NAMES}")
     a0 = np.asarray(alpha0, dtype=np.float64)

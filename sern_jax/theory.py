@@ -7,7 +7,9 @@ every quantity that can overflow is computed in log-space. Equation references:
 * "audit §x" — ``reference/theory-audit.md``.
 
 Notation: ``K`` arms, horizon ``T`` (``log_t = ln T``), temperature ``alpha``; for the horizon
-schedule of Theorem 4, ``alpha = alpha0 / ln(T^p)``.
+schedule of Theorem 4, ``alpha = alpha0 / ln(T^p)`` (computed by ``schedules.alpha_of_horizon``:
+α(T) is written once, there). This module owns Theorem 1's constant c = e^{-1/α}/K
+(:func:`thm1_c`) and the exact floor π_min (:func:`thm1_pi_min`); everything else uses these.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+
+from sern_jax import schedules
 
 __all__ = [
     "thm1_c",
@@ -360,7 +364,7 @@ def thm4_c_log_ratio(log_t, num_arms, alpha0, p) -> np.ndarray:
     _check_positive("alpha0", alpha0)
     _check_positive("p", p)
     L = _f64(log_t)
-    alpha = _f64(alpha0) / (_f64(p) * L)
+    alpha = schedules.alpha_of_log_horizon("log", L, alpha0, p)
     log_pi = thm1_log_pi_min(alpha, num_arms)
     log_c4 = -1.0 / _f64(alpha0) - _f64(p) * L - np.log(_f64(num_arms))
     return log_pi - log_c4

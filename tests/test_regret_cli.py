@@ -58,3 +58,11 @@ def test_different_experiment_in_same_dir_is_refused(run_dir):
 def test_bad_input_names_the_value(bad, match, tmp_path, capsys):
     assert cli.main(ARGS + bad + ["--out", str(tmp_path / "x")]) == 2
     assert match in capsys.readouterr().err
+
+
+def test_summary_saves_theorem1_floor_for_the_figure(run_dir):
+    # experiments/regret.py saves α(T), c = e^{-1/α}/K and π_min; the figure only reads them.
+    floor = io.load_json(run_dir / "summary.json")["theorem1"]
+    assert floor["alpha"] == pytest.approx(0.1)  # constant schedule, default α0
+    assert floor["c"] == pytest.approx(np.exp(-1 / 0.1) / 4, rel=1e-12)
+    assert floor["pi_min"] == pytest.approx(1 / (1 + 3 * np.exp(1 / 0.1)), rel=1e-12)

@@ -159,3 +159,24 @@ def test_exact_oracle_regret_and_worst_case():
     grid = np.linspace(1e-4, 1.0, 200_001)
     assert m == pytest.approx(th.exact_oracle_regret_k2(T, grid, 1.0, 0.3).max(), rel=1e-6)
     assert m / T == pytest.approx(0.067, abs=5e-4)  # audit §3.10
+
+
+def test_host_alpha_is_the_traced_schedule_and_feeds_theorem1():
+    # one α(T) (schedules), evaluated on the host and in traced code, gives the same float64
+    import jax
+    import jax.numpy as jnp
+
+    from sern_jax import schedules
+
+    with jax.enable_x64():
+        for kind in schedules.SCHEDULE_NAMES:
+            for horizon, a0, p in ((10, 1.0, 0.3), (1000, 0.5, 0.2), (10**6, 2.0, 0.1)):
+                traced = schedules.alpha_t(kind, 0, horizon, jnp.float64(a0), jnp.float64(p))
+                host = schedules.alpha_of_horizon(kind, horizon, a0, p)
+                assert float(host) == pytest.approx(float(traced), rel=1e-15), (kind, horizon)
+    assert float(schedules.alpha_of_horizon("log", 1000, 1.0, 0.3)) == 1.0 / (0.3 * math.log(1000))
+    log_t = np.array([2.0, 50.0, 180.0])  # T up to e^180: beyond float range as a horizon
+    np.testing.assert_allclose(schedules.alpha_of_log_horizon("theorem4", log_t, 0.5, 0.3),
+                               0.5 / (1 + 0.5 * 0.3 * log_t), rtol=1e-15)
+    with pytest.raises(ValueError, match="cosine"):
+        schedules.alpha_of_horizon("cosine", 10, 1.0, 0.3)

@@ -37,13 +37,13 @@ import numpy as np
 __all__ = [
     "GreedyMapResult",
     "greedy_map",
+    "kdpp_eigen_select",
+    "median_lengthscale",
+    "random_fourier_features",
     "sample_kdpp",
     "sample_kdpp_batch",
-    "kdpp_eigen_select",
-    "random_fourier_features",
-    "median_lengthscale",
-    "standardize",
     "select_core_set",
+    "standardize",
 ]
 
 # Relative eigenvalue (resp. pivot) threshold below which a direction counts as rank-deficient:
@@ -55,7 +55,9 @@ class GreedyMapResult(NamedTuple):
     """Output of :func:`greedy_map`."""
 
     indices: jax.Array  # [k] int32, in selection order
-    log_det_gains: jax.Array  # [k] float64; gains[t] = log det L_{S_t+1} - log det L_{S_t}
+    log_det_gains: (
+        jax.Array
+    )  # [k] float64; gains[t] = log det L_{S_t+1} - log det L_{S_t}
 
 
 # --------------------------------------------------------------------------------------
@@ -172,7 +174,9 @@ def _sample_kdpp_core(key, features, eigvals, eigvecs, rank_tol, k: int):
     # Dual eigenvectors (Alg. 3): u_n = F v_n / sqrt(lambda_n) are orthonormal in R^N.
     basis = eigvecs[:, chosen] / jnp.sqrt(eigvals[chosen])[None, :]  # [d, k]
     rows = features @ basis  # [N, k]; rows of the orthonormal N x k matrix U
-    row_norm2 = jnp.sum(rows * rows, axis=1)  # [N] = diag of the projection kernel U U^T
+    row_norm2 = jnp.sum(
+        rows * rows, axis=1
+    )  # [N] = diag of the projection kernel U U^T
     cdf = jnp.cumsum(row_norm2)
     total = cdf[-1]
 
@@ -193,7 +197,11 @@ def _sample_kdpp_core(key, features, eigvals, eigvecs, rank_tol, k: int):
         resid = resid - q.T @ (q @ resid)  # re-orthogonalise (Gram-Schmidt twice)
         res2 = jnp.sum(resid * resid)
         accept = jax.random.uniform(key_a, (), dtype=total.dtype) * row_norm2[i] < res2
-        accept = accept & (row_norm2[i] > 0) & ~jnp.any((selected == i) & (jnp.arange(k) < t))
+        accept = (
+            accept
+            & (row_norm2[i] > 0)
+            & ~jnp.any((selected == i) & (jnp.arange(k) < t))
+        )
         q_new = q.at[t].set(resid / jnp.sqrt(jnp.where(accept, res2, 1.0)))
         q = jnp.where(accept, q_new, q)
         selected = jnp.where(accept, selected.at[t].set(i), selected)
@@ -309,7 +317,9 @@ def sample_kdpp_batch(keys: jax.Array, features, k: int) -> jax.Array:
       [S, k] int32 indices; each row distinct, in draw order.
     """
     if np.ndim(keys) != 1:
-        raise ValueError(f"keys must be a 1-D array of keys; got shape {np.shape(keys)}.")
+        raise ValueError(
+            f"keys must be a 1-D array of keys; got shape {np.shape(keys)}."
+        )
     with jax.enable_x64():
         feats, eigvals, eigvecs, rank_tol = _prepare_dual(features, k)
         return _sample_kdpp_batch_core(keys, feats, eigvals, eigvecs, rank_tol, k)
@@ -398,9 +408,15 @@ def median_lengthscale(key: jax.Array, x, num_subsample: int = 1000) -> float:
     """
     num, _ = _check_features(x, None, "x")
     with jax.enable_x64():
-        ell = float(_median_lengthscale(key, jnp.asarray(x, jnp.float64), min(num, num_subsample)))
+        ell = float(
+            _median_lengthscale(
+                key, jnp.asarray(x, jnp.float64), min(num, num_subsample)
+            )
+        )
     if not ell > 0.0:
-        raise ValueError("median pairwise distance is 0: points coincide; pass a lengthscale.")
+        raise ValueError(
+            "median pairwise distance is 0: points coincide; pass a lengthscale."
+        )
     return ell
 
 
@@ -433,8 +449,10 @@ def random_fourier_features(
       [N, M] float64 features.
     """
     _check_features(x, None, "x")
-    if isinstance(num_features, bool) or not isinstance(num_features, (int, np.integer)):
-        raise ValueError(f"num_features must be an int; got {num_features!r}.")
+    if isinstance(num_features, bool) or not isinstance(
+        num_features, (int, np.integer)
+    ):
+        raise ValueError(f"num_features must be an int; got {num_features!r}.")  # noqa: TRY004 (one error type for bad input)
     if num_features < 2 or num_features % 2:
         raise ValueError(f"num_features must be even and >= 2; got {num_features}.")
     key_ell, key_w = jax.random.split(key)
@@ -444,7 +462,9 @@ def random_fourier_features(
     if not (np.isfinite(lengthscale) and lengthscale > 0):
         raise ValueError(f"lengthscale must be finite and > 0; got {lengthscale}.")
     with jax.enable_x64():
-        return _rff(key_w, jnp.asarray(x, jnp.float64), float(lengthscale), int(num_features))
+        return _rff(
+            key_w, jnp.asarray(x, jnp.float64), float(lengthscale), int(num_features)
+        )
 
 
 def select_core_set(

@@ -28,6 +28,7 @@ import time
 from typing import Callable
 
 import numpy as np
+from scipy.stats import norm
 
 PASS, FAIL, UNINFORMATIVE, VACUOUS = "PASS", "FAIL", "UNINFORMATIVE", "VACUOUS"
 HOLDS, FAILS = "HOLDS", "FAILS"
@@ -213,7 +214,7 @@ def equal_cell(label, values, target, alpha=0.01, **kw) -> Cell:
     x = np.asarray(values, dtype=np.float64).ravel()
     ci = stats.mean_ci(x, 1.0 - alpha, side="two")
     if ci.se > 0:
-        p = float(2.0 * stats.normal_sf(abs(ci.mean - target) / ci.se))
+        p = float(2.0 * norm.sf(abs(ci.mean - target) / ci.se))
     else:
         p = 0.0 if abs(ci.mean - target) > REL_TOL * abs(target) else 1.0
     return Cell(label, ci.mean, float(target), "eq", lower=ci.lower, upper=ci.upper,
@@ -247,7 +248,7 @@ def bootstrap_cell(label, data, fn, bound, direction="le", alpha=0.01, seed=0,
     _, lo1, hi1 = stats.bootstrap_ci(data, fn, seed=seed, num_resamples=num_resamples,
                                      level=1.0 - alpha, side=side, method="bca")
     # Approximate one-sided p-value from a normal fit of the bootstrap spread.
-    se = max((hi - lo) / (2.0 * float(stats.normal_quantile(1.0 - alpha / 2.0))), 1e-300)
+    se = max((hi - lo) / (2.0 * float(norm.ppf(1.0 - alpha / 2.0))), 1e-300)
     p = stats.mean_pvalue(est, se, float(bound), direction)
     lower, upper = (lo1, hi) if direction == "le" else (lo, hi1)
     exc = stats.mean_detectable_excess(se, alpha)
@@ -412,6 +413,9 @@ def run_check(check: Check, ctx: Context) -> CheckResult:
 
 
 def alpha_log(alpha0: float, p: float, horizon: float) -> float:
-    """alpha = alpha0 / ln(T^p) (Algorithm 1 / Theorem 4 schedule)."""
-    return alpha0 / (p * math.log(horizon))
+    """alpha = alpha0 / ln(T^p) (Algorithm 1 / Theorem 4 schedule): ``schedules.alpha_of_horizon``
+    with ``kind="log"``, as a float."""
+    from sern_jax import schedules
+
+    return float(schedules.alpha_of_horizon("log", horizon, alpha0, p))
 

@@ -1,4 +1,7 @@
-"""Tests for sern_jax.stats against scipy and by simulated coverage."""
+"""Tests for sern_jax.stats against exact sums, definitions and simulated coverage."""
+
+import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -7,27 +10,41 @@ from scipy import stats as sps
 from sern_jax import stats as st
 
 
-def test_beta_quantile_matches_scipy():
-    q = np.array([1e-6, 0.005, 0.3, 0.99, 0.999999])
-    for a, b in ((0.5, 0.5), (2.5, 7.0), (1.0, 4096.0), (3000.0, 1097.0)):
-        np.testing.assert_allclose(st.beta_quantile(q, a, b), sps.beta.ppf(q, a, b), rtol=1e-9, atol=1e-15)
+def _binom_sf_exact(k, n, p):
+    """P(Bin(n, p) >= k) in exact rational arithmetic from the float p (independent of scipy)."""
+    q = Fraction(p)
+    return float(sum(math.comb(n, j) * q**j * (1 - q) ** (n - j) for j in range(k, n + 1)))
 
 
-def test_clopper_pearson_matches_scipy():
+def test_clopper_pearson_solves_its_defining_equations():
+    # lower: P(Bin(n, lo) >= k) = tail; upper: P(Bin(n, hi) <= k) = tail (exact sums), and the
+    # beta-quantile form lo = B^{-1}(tail; k, n-k+1), hi = B^{-1}(1-tail; k+1, n-k).
     n = 500
     ks = np.array([0, 1, 7, 250, 499, 500])
     lo, hi = st.clopper_pearson(ks, n, 0.99)
+    assert lo[0] == 0.0 and hi[-1] == 1.0
     for k, l, h in zip(ks, lo, hi):
-        ci = sps.binomtest(int(k), n).proportion_ci(0.99, "exact")
-        assert l == pytest.approx(ci.low, abs=1e-12)
-        assert h == pytest.approx(ci.high, abs=1e-12)
+        if k > 0:
+            assert _binom_sf_exact(int(k), n, l) == pytest.approx(0.005, rel=1e-8)
+            assert l == pytest.approx(sps.beta.ppf(0.005, k, n - k + 1), abs=1e-12)
+        if k < n:
+            assert 1.0 - _binom_sf_exact(int(k) + 1, n, h) == pytest.approx(0.005, rel=1e-8)
+            assert h == pytest.approx(sps.beta.ppf(0.995, k + 1, n - k), abs=1e-12)
     lo1, hi1 = st.clopper_pearson(7, n, 0.99, side="lower")
     assert hi1 == 1.0 and lo1 == pytest.approx(sps.beta.ppf(0.01, 7, n - 6), rel=1e-9)
+    lo2, hi2 = st.clopper_pearson([[3, 9]], [[40, 40]], 0.9, side="upper")
+    assert lo2.shape == (1, 2) and np.all(lo2 == 0.0)
+    assert hi2[0, 0] == pytest.approx(sps.beta.ppf(0.9, 4, 37), rel=1e-9)
+    with pytest.raises(ValueError, match="k <= n"):
+        st.clopper_pearson(5, 4)
+    with pytest.raises(ValueError, match="side"):
+        st.clopper_pearson(1, 4, side="both")
 
 
-def test_binom_sf_matches_scipy():
-    for k, n, p in ((5, 100, 0.02), (0, 10, 0.5), (60, 100, 0.5)):
-        assert st.binom_sf(k, n, p) == pytest.approx(sps.binom.sf(k - 1, n, p), rel=1e-9, abs=1e-300)
+def test_tail_pvalue_is_the_exact_binomial_tail():
+    for k, n, p in ((5, 100, 0.02), (1, 10, 0.5), (60, 100, 0.5), (30, 40, 0.3)):
+        assert st.tail_pvalue(k, n, p) == pytest.approx(_binom_sf_exact(k, n, p), rel=1e-9)
+    assert st.tail_pvalue(0, 10, 0.5) == 1.0 and st.tail_pvalue(11, 10, 0.5) == 0.0
 
 
 def test_holm_matches_definition():

@@ -233,3 +233,20 @@ def test_each_core_module_imports_alone_in_a_fresh_interpreter():
         res = subprocess.run([sys.executable, "-c", f"import {module}"], env=env, cwd=ROOT,
                              capture_output=True, text=True, timeout=300)
         assert res.returncode == 0, (module, res.stderr[-2000:])
+
+
+def test_package_reexports_core_modules_lazily():
+    script = textwrap.dedent("""
+        import sys, sern_jax
+        assert not {"jax", "mujoco", "flax"} & set(sys.modules), "import sern_jax is not lazy"
+        for name in sern_jax.__all__[1:]:
+            module = getattr(sern_jax, name)
+            missing = [n for n in module.__all__ if not hasattr(module, n)]
+            assert not missing, (name, missing)
+        assert sern_jax.executor.run_seeds
+        assert not {"mujoco", "flax"} & set(sys.modules), "a core module imported mujoco/flax"
+    """)
+    res = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert set(CORE) - {CLI_MODULE} >= set(__import__("sern_jax").__all__[1:])

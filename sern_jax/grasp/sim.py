@@ -123,7 +123,7 @@ class TrialConfig:
     shake_hz: float = 4.0
     hold_steps: int = 30
     success_lift: float = 0.10
-    friction_range: tuple[float, float] = (0.5, 1.0)
+    friction_range: tuple[float, float] = (0.3, 0.8)
     mass_scale_range: tuple[float, float] = (0.8, 1.25)
     pos_noise_std: float = 0.002
     yaw_noise_std: float = 0.05

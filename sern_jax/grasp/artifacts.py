@@ -1,0 +1,129 @@
+"""The shipped pretrained network θ0 and core set C: package data with a manifest.
+
+``sern grasp pretrain --install`` writes, into ``sern_jax/grasp/data/``:
+
+* ``theta0.msgpack``: the quality network's ``QualityParams`` (weights + input normaliser),
+  flax serialisation;
+* ``core_set.npz``: the k = 172 crops chosen by the DPP from D0 (``dpp_*`` arrays) and, for
+  the ablation, k crops chosen uniformly at random (``random_*``), each with grasp depth and
+  label, stored as float16 crops (a few hundred kB);
+* ``manifest.json``: how they were made (command, seed, commit, D0 size, training settings,
+  held-out metrics, the network config), so anyone can regenerate them.
+
+:func:`load_theta0` reads them (cached); a user needs no pretraining to start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sern_jax import io
+from sern_jax.grasp import quality_net as qn
+
+__all__ = [
+    "DATA_DIR",
+    "Theta0",
+    "save",
+    "load_theta0",
+    "core_set_data",
+    "CORE_SET_KINDS",
+]
+
+DATA_DIR = Path(__file__).resolve().with_name("data")
+THETA0_FILE = "theta0.msgpack"
+CORE_FILE = "core_set.npz"
+MANIFEST_FILE = "manifest.json"
+CORE_SET_KINDS = ("dpp", "random", "none")
+
+
+class Theta0(NamedTuple):
+    """A pretrained network and where it came from."""
+
+    network: qn.QualityNetwork
+    params: qn.QualityParams
+    core: dict  # {"dpp_image" [k, S, S], "dpp_depth" [k], "dpp_label" [k], "random_*" ...}
+    manifest: dict
+    fingerprint: str  # sha256 of the serialised params (16 hex digits)
+
+
+def _config_from(manifest: dict) -> qn.QualityNetConfig:
+    fields = {f.name for f in dataclasses.fields(qn.QualityNetConfig)}
+    raw = {k: (tuple(v) if isinstance(v, list) else v)
+           for k, v in manifest["network_config"].items() if k in fields}
+    return qn.QualityNetConfig(**raw)
+
+
+def save(
+    out_dir: str | Path,
+    network: qn.QualityNetwork,
+    params: qn.QualityParams,
+    core: dict[str, np.ndarray],
+    manifest: dict,
+) -> Path:
+    """Writes θ0, the core sets and the manifest into ``out_dir`` (atomically, each)."""
+    from flax import serialization
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    blob = serialization.to_bytes(jax.device_get(params))
+    io._atomic_write_bytes(out_dir / THETA0_FILE, blob)
+    stored = {k: (np.asarray(v, np.float16) if k.endswith("_image") else np.asarray(v))
+              for k, v in core.items()}
+    io.save_npz(out_dir / CORE_FILE, **stored)
+    manifest = dict(manifest)
+    manifest["network_config"] = dataclasses.asdict(network.config)
+    manifest["theta0_sha256"] = hashlib.sha256(blob).hexdigest()
+    io.save_json(out_dir / MANIFEST_FILE, manifest)
+    return out_dir
+
+
+@functools.lru_cache(maxsize=4)
+def _load(path: str) -> Theta0:
+    from flax import serialization
+
+    root = Path(path)
+    missing = [f for f in (THETA0_FILE, CORE_FILE, MANIFEST_FILE) if not (root / f).exists()]
+    if missing:
+        raise ValueError(
+            f"no pretrained network in {root} (missing {', '.join(missing)}); make one with "
+            "`sern grasp dataset` then `sern grasp pretrain --install`")
+    manifest = io.load_json(root / MANIFEST_FILE)
+    network = qn.make_quality_network(_config_from(manifest))
+    blob = (root / THETA0_FILE).read_bytes()
+    digest = hashlib.sha256(blob).hexdigest()
+    if manifest.get("theta0_sha256") not in (None, digest):
+        raise ValueError(f"{root / THETA0_FILE} does not match its manifest (sha256 "
+                         f"{digest[:16]} != {manifest['theta0_sha256'][:16]})")
+    template = network.init(jax.random.key(0))
+    params = serialization.from_bytes(template, blob)
+    params = jax.tree.map(jnp.asarray, params)
+    core = io.load_npz(root / CORE_FILE)
+    return Theta0(network, params, core, manifest, digest[:16])
+
+
+def load_theta0(path: str | Path | None = None) -> Theta0:
+    """The pretrained θ0 and core sets (default: the package's shipped copy)."""
+    return _load(str(Path(path) if path is not None else DATA_DIR))
+
+
+def core_set_data(kind: str, theta0: Theta0) -> qn.TrainData:
+    """The core set C as training rows (weight 1 each); ``"none"`` gives zero rows."""
+    if kind not in CORE_SET_KINDS:
+        raise ValueError(f"core set must be one of {CORE_SET_KINDS}, got {kind!r}")
+    if kind == "none":
+        s = theta0.network.config.crop_size
+        return qn.TrainData(np.zeros((0, s, s), np.float32), np.zeros(0, np.float32),
+                            np.zeros(0, np.float32), np.zeros(0, np.float32))
+    c = theta0.core
+    image = np.asarray(c[f"{kind}_image"], np.float32)
+    return qn.TrainData(image, np.asarray(c[f"{kind}_depth"], np.float32),
+                        np.asarray(c[f"{kind}_label"], np.float32),
+                        np.ones(len(image), np.float32))

@@ -1,0 +1,410 @@
+"""Pretraining θ0 on D0, its held-out evaluation, and the DPP core set.
+
+``pretrain(data_dir, config, out_dir)``:
+
+1. crops every labelled grasp of D0 (``crops.extract_batch``; crops are not stored in D0);
+2. fits the input normaliser on the training objects and trains the quality network with
+   Adam on binary cross-entropy (the default; ``loss="l1"`` is the printed Algorithm 1's
+   loss, a negative control), minibatches drawn by a seeded permutation per epoch, a
+   checkpoint after every epoch (an interrupted run resumes at the last finished epoch);
+3. evaluates on objects never seen in training (the same procedural population with another
+   seed): ROC-AUC and accuracy against single-trial outcomes, and calibration (reliability
+   diagram, ECE) against success frequencies from ``heldout_trials`` trials per grasp;
+4. chooses the core set C: features (the network's penultimate layer) of every D0 grasp,
+   lifted by random Fourier features, k = 172 drawn by an exact k-DPP (``dpp``), plus k
+   uniformly random grasps for the ablation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from sern_jax import dpp, io
+from sern_jax.grasp import artifacts
+from sern_jax.grasp import crops as crops_lib
+from sern_jax.grasp import dataset as dataset_lib
+from sern_jax.grasp import objects as objects_lib
+from sern_jax.grasp import quality_net as qn
+
+__all__ = [
+    "PretrainConfig",
+    "crops_of",
+    "pretrain",
+    "evaluate",
+    "classification_metrics",
+    "HELDOUT_SEED_OFFSET",
+    "HARD_RULE",
+    "screen",
+]
+
+HELDOUT_SEED_OFFSET = 1_000_003  # held-out population seed = D0 seed + this
+
+
+@dataclasses.dataclass(frozen=True)
+class PretrainConfig:
+    """Training, evaluation and core-set settings of ``sern grasp pretrain``."""
+
+    epochs: int = 8
+    batch_size: int = 128
+    learning_rate: float = 1e-3
+    loss: str = "bce"
+    seed: int = 0
+    heldout_objects: int = 12
+    heldout_poses: int = 4
+    heldout_trials: int = 16
+    core_k: int = 172
+    core_method: str = "sample"
+
+    def __post_init__(self):
+        for name in ("epochs", "batch_size", "heldout_objects", "heldout_poses",
+                     "heldout_trials", "core_k"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if not (np.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
+        if self.loss not in qn.LOSSES:
+            raise ValueError(f"loss must be one of {sorted(qn.LOSSES)}, got {self.loss!r}")
+        if self.core_method not in ("sample", "greedy"):
+            raise ValueError(f"core_method must be sample or greedy, got {self.core_method!r}")
+
+    def fingerprint(self, data_fingerprint: str) -> str:
+        d = dataclasses.asdict(self)
+        d["data"] = data_fingerprint
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+_CROP = jax.jit(lambda d, c, a, g: crops_lib.extract_batch(d, (c, a, g)))
+
+
+def crops_of(arrays: dict[str, np.ndarray], chunk: int = 256):
+    """Crops of every valid candidate of a dataset's contexts.
+
+    Returns (image [n, S, S] float32, depth [n], context [n] index, slot [n] index), in
+    context-major order of the valid slots.
+    """
+    valid = arrays["valid"]
+    images, depths = [], []
+    num = len(valid)
+    for lo in range(0, num, chunk):
+        hi = min(lo + chunk, num)
+        # pad the last chunk to the fixed shape: one compile
+        pad = chunk - (hi - lo)
+        sl = lambda a: np.concatenate([a[lo:hi], np.repeat(a[hi - 1:hi], pad, 0)])  # noqa: E731
+        c = _CROP(sl(arrays["depth"]), sl(arrays["center_px"]), sl(arrays["angle_px"]),
+                  sl(arrays["grasp_depth"]))
+        v = valid[lo:hi]
+        images.append(np.asarray(c.image)[: hi - lo][v])
+        depths.append(np.asarray(c.depth)[: hi - lo][v])
+    ctx, slot = np.nonzero(valid)
+    return np.concatenate(images), np.concatenate(depths), ctx, slot
+
+
+def classification_metrics(prob: np.ndarray, label: np.ndarray,
+                           freq: np.ndarray | None = None, bins: int = 10) -> dict:
+    """Accuracy and ROC-AUC against 0/1 outcomes; calibration against frequencies.
+
+    Args:
+      prob: [n] predicted P(success).
+      label: [n] single-trial outcomes (0/1).
+      freq: optional [n] success frequencies from many trials (the calibration target;
+        defaults to ``label``).
+      bins: equal-width bins of the reliability diagram.
+
+    Returns:
+      dict with accuracy, roc_auc (Mann-Whitney, ties counted half), positive_rate, brier,
+      ece, and the reliability diagram (per bin: count, mean prediction, mean frequency).
+    """
+    prob = np.asarray(prob, np.float64)
+    label = np.asarray(label).astype(bool)
+    target = label.astype(np.float64) if freq is None else np.asarray(freq, np.float64)
+    pos, neg = prob[label], prob[~label]
+    if len(pos) and len(neg):
+        order = np.argsort(np.concatenate([pos, neg]), kind="mergesort")
+        ranks = np.empty(len(order))
+        values = np.concatenate([pos, neg])[order]
+        # average ranks over ties
+        uniq, start, counts = np.unique(values, return_index=True, return_counts=True)
+        avg = start + (counts + 1) / 2.0
+        ranks[order] = np.repeat(avg, counts)
+        auc = (ranks[: len(pos)].sum() - len(pos) * (len(pos) + 1) / 2) / (len(pos) * len(neg))
+    else:
+        auc = float("nan")
+    edges = np.linspace(0, 1, bins + 1)
+    which = np.clip(np.digitize(prob, edges) - 1, 0, bins - 1)
+    diagram, ece = [], 0.0
+    for b in range(bins):
+        m = which == b
+        if m.any():
+            conf, acc = float(prob[m].mean()), float(target[m].mean())
+            ece += m.mean() * abs(conf - acc)
+            diagram.append({"bin": [float(edges[b]), float(edges[b + 1])],
+                            "count": int(m.sum()), "mean_prediction": conf,
+                            "mean_frequency": acc})
+    return {
+        "n": int(len(prob)),
+        "accuracy": float(np.mean((prob >= 0.5) == label)),
+        "accuracy_majority_class": float(max(label.mean(), 1 - label.mean())),
+        "roc_auc": float(auc),
+        "positive_rate": float(label.mean()),
+        "brier": float(np.mean((prob - target) ** 2)),
+        "ece": float(ece),
+        "reliability": diagram,
+    }
+
+
+def _predict(network, params, image, depth, chunk: int = 4096) -> np.ndarray:
+    fn = _predict_fn(network)
+    out = []
+    for lo in range(0, len(image), chunk):
+        hi = min(lo + chunk, len(image))
+        pad = chunk - (hi - lo)
+        im = np.concatenate([image[lo:hi], np.zeros((pad,) + image.shape[1:], image.dtype)])
+        de = np.concatenate([depth[lo:hi], np.zeros(pad, depth.dtype)])
+        out.append(np.asarray(fn(params, im, de))[: hi - lo])
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+_PREDICT_FNS: dict = {}
+
+
+def _predict_fn(network, what: str = "apply"):
+    key = (network.config, what)
+    if key not in _PREDICT_FNS:
+        _PREDICT_FNS[key] = jax.jit(getattr(network, what))
+    return _PREDICT_FNS[key]
+
+
+def _features(network, params, image, depth, chunk: int = 4096) -> np.ndarray:
+    fn = _predict_fn(network, "features")
+    out = []
+    for lo in range(0, len(image), chunk):
+        hi = min(lo + chunk, len(image))
+        pad = chunk - (hi - lo)
+        im = np.concatenate([image[lo:hi], np.zeros((pad,) + image.shape[1:], image.dtype)])
+        de = np.concatenate([depth[lo:hi], np.zeros(pad, depth.dtype)])
+        out.append(np.asarray(fn(params, im, de))[: hi - lo])
+    return np.concatenate(out)
+
+
+def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backend,
+                      progress, desc):
+    """Predictions against outcomes on ``specs``: (probs, labels, freqs, per-object rows)."""
+    from tqdm.auto import tqdm
+
+    probs, labels, freqs, per_object = [], [], [], []
+    for i, spec in enumerate(tqdm(specs, desc=desc, unit="obj", disable=not progress)):
+        lc = dataset_lib.label_contexts(jax.random.fold_in(root, i), spec, num_poses,
+                                        num_trials, backend)
+        arrays = {f: getattr(lc, f) for f in ("depth", "center_px", "angle_px",
+                                               "grasp_depth", "valid")}
+        image, depth, ctx, slot = crops_of(arrays)
+        p = _predict(network, params, image, depth)
+        probs.append(p)
+        labels.append(lc.label[ctx, slot])
+        freqs.append(lc.successes[ctx, slot] / num_trials)
+        # the greedy choice of each pose against the best candidate of that pose
+        score = np.full(lc.valid.shape, -np.inf)
+        score[ctx, slot] = p
+        greedy = np.argmax(score, axis=1)
+        freq_all = np.where(lc.valid, lc.successes / num_trials, -1.0)
+        rows = np.arange(len(greedy))
+        per_object.append({
+            "object": spec.name,
+            "greedy_success": float(freq_all[rows, greedy].mean()),
+            "best_success": float(freq_all.max(1).mean()),
+            "mean_success": float(freqs[-1].mean()),
+            "candidate_success_quartiles": [float(q) for q in
+                                            np.percentile(freqs[-1], [25, 50, 75])],
+            "valid_per_pose": float(lc.valid.sum(1).mean()),
+            "poses": int(num_poses),
+            "trials": int(num_trials),
+        })
+    return probs, labels, freqs, per_object
+
+
+def evaluate(network, params, data_seed: int, config: PretrainConfig,
+             backend: str = "native", progress: bool = True) -> dict:
+    """Held-out metrics of ``params`` on objects never seen in training.
+
+    The held-out objects are ``objects.sample_population(data_seed + HELDOUT_SEED_OFFSET,
+    heldout_objects)``: the same procedural families as D0, other shapes and sizes.
+    """
+    seed = data_seed + HELDOUT_SEED_OFFSET
+    specs = objects_lib.sample_population(seed, config.heldout_objects)
+    probs, labels, freqs, per_object = _evaluate_objects(
+        network, params, specs, jax.random.key(seed), config.heldout_poses,
+        config.heldout_trials, backend, progress, "held-out")
+    metrics = classification_metrics(np.concatenate(probs), np.concatenate(labels),
+                                     np.concatenate(freqs))
+    metrics["objects"] = per_object
+    metrics["heldout_seed"] = seed
+    return metrics
+
+
+HARD_RULE = {"max_greedy_success": 0.6, "min_best_success": 0.8}
+
+
+def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, seed: int = 0,
+           backend: str = "native", progress: bool = True) -> list[dict]:
+    """The hard-set rule on each object: θ0's greedy success and the best candidate's.
+
+    An object is *hard* (``row["hard"]``) when, averaged over ``num_poses`` random resting
+    poses, θ0's greedy choice succeeds at most 60 % of the time while the best of the 64
+    candidates succeeds at least 80 % of the time (success frequencies over ``num_trials``
+    trials): θ0 grasps it poorly and there is something to learn. This is how the paper
+    picked its meshes ("hardly grasped by the pretrained model"), made a stated rule.
+    """
+    *_, rows = _evaluate_objects(network, params, specs, jax.random.key(seed), num_poses,
+                                 num_trials, backend, progress, "screen")
+    for row in rows:
+        row["hard"] = bool(row["greedy_success"] <= HARD_RULE["max_greedy_success"]
+                           and row["best_success"] >= HARD_RULE["min_best_success"])
+    return rows
+
+
+def pretrain(
+    data_dir: str | Path,
+    config: PretrainConfig,
+    out_dir: str | Path,
+    *,
+    network_config: qn.QualityNetConfig = qn.QualityNetConfig(),
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> dict:
+    """Trains θ0 on D0, evaluates it on held-out objects and picks the core sets.
+
+    Writes into ``out_dir``: ``checkpoint.npz`` (after each epoch; resumes), ``history.json``,
+    ``metrics.json`` and the artefacts of :mod:`artifacts` (``theta0.msgpack``,
+    ``core_set.npz``, ``manifest.json``). Returns the manifest.
+    """
+    from tqdm.auto import tqdm
+
+    out_dir = Path(out_dir)
+    t_start = time.perf_counter()
+    data_config, arrays = dataset_lib.load(data_dir)
+    fingerprint = config.fingerprint(data_config.fingerprint())
+    ckpt = out_dir / "checkpoint.npz"
+    if ckpt.exists() and str(io.load_npz(ckpt)["fingerprint"]) != fingerprint:
+        raise ValueError(f"{out_dir} holds another pretraining run; choose another --out "
+                         "or delete it")
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    t = time.perf_counter()
+    image, depth, ctx, slot = crops_of(arrays)
+    label = arrays["label"][ctx, slot].astype(np.float32)
+    obj = arrays["object_index"][ctx]
+    log(f"D0: {len(label):,} labelled grasps from {data_config.num_objects} objects "
+        f"({label.mean():.1%} successes); crops in {time.perf_counter() - t:.1f} s")
+    # validation split by object (every 10th object), for the training curve only
+    val = obj % 10 == 9
+    tr = ~val
+    network = qn.make_quality_network(network_config)
+    normalizer = qn.fit_normalizer(image[tr], depth[tr])
+    key = jax.random.key(config.seed)
+    params = network.init(jax.random.fold_in(key, 0), normalizer)
+    optimizer = optax.adam(config.learning_rate)
+    opt_state = qn.init_opt_state(optimizer, params)
+    step = jax.jit(qn.make_train_step(network, optimizer, config.loss))
+    history, start_epoch = [], 0
+    if ckpt.exists():
+        saved = io.load_npz(ckpt)
+        leaves = [saved[f"p{i}"] for i in range(len(jax.tree.leaves(params)))]
+        params = jax.tree.unflatten(jax.tree.structure(params), [jnp.asarray(x) for x in leaves])
+        oleaves = [saved[f"o{i}"] for i in range(len(jax.tree.leaves(opt_state)))]
+        opt_state = jax.tree.unflatten(jax.tree.structure(opt_state),
+                                       [jnp.asarray(x) for x in oleaves])
+        history = json.loads(str(saved["history"]))
+        start_epoch = int(saved["epoch"])
+        log(f"resuming at epoch {start_epoch}")
+
+    idx_tr = np.flatnonzero(tr)
+    bs = config.batch_size
+    steps = len(idx_tr) // bs
+    if steps < 1:
+        raise ValueError(f"D0 has {len(idx_tr)} training grasps, fewer than one batch ({bs})")
+    ones = np.ones(bs, np.float32)
+    for epoch in range(start_epoch, config.epochs):
+        t = time.perf_counter()
+        perm = np.asarray(jax.random.permutation(jax.random.fold_in(key, 1000 + epoch),
+                                                 len(idx_tr)))
+        order = idx_tr[perm]
+        losses = []
+        for b in tqdm(range(steps), desc=f"epoch {epoch + 1}/{config.epochs}", unit="step",
+                      disable=not progress, leave=False):
+            sel = order[b * bs:(b + 1) * bs]
+            params, opt_state, loss = step(
+                params, opt_state, qn.TrainData(image[sel], depth[sel], label[sel], ones))
+            losses.append(loss)
+        train_loss = float(np.mean(jax.device_get(losses)))
+        pv = _predict(network, params, image[val], depth[val])
+        vm = classification_metrics(pv, label[val] > 0.5)
+        history.append({"epoch": epoch + 1, "train_loss": train_loss,
+                        "val_accuracy": vm["accuracy"], "val_roc_auc": vm["roc_auc"],
+                        "seconds": time.perf_counter() - t})
+        log(f"epoch {epoch + 1}: train loss {train_loss:.4f}, validation accuracy "
+            f"{vm['accuracy']:.3f}, AUC {vm['roc_auc']:.3f} ({time.perf_counter() - t:.0f} s)")
+        arrays_ckpt = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(params))}
+        arrays_ckpt.update({f"o{i}": np.asarray(x)
+                            for i, x in enumerate(jax.tree.leaves(opt_state))})
+        io.save_npz(ckpt, fingerprint=np.asarray(fingerprint), epoch=np.asarray(epoch + 1),
+                    history=np.asarray(json.dumps(history)), **arrays_ckpt)
+    io.save_json(out_dir / "history.json", history)
+    train_s = time.perf_counter() - t_start
+
+    log("held-out evaluation ...")
+    t = time.perf_counter()
+    metrics = evaluate(network, params, data_config.seed, config, data_config.backend,
+                       progress)
+    eval_s = time.perf_counter() - t
+    log(f"held-out: accuracy {metrics['accuracy']:.3f} (majority class "
+        f"{metrics['accuracy_majority_class']:.3f}), ROC-AUC {metrics['roc_auc']:.3f}, "
+        f"ECE {metrics['ece']:.3f} on {metrics['n']:,} grasps")
+
+    t = time.perf_counter()
+    feats = _features(network, params, image, depth)
+    k = config.core_k
+    if k > len(feats):
+        raise ValueError(f"core set k = {k} exceeds D0's {len(feats)} grasps")
+    key_core = jax.random.fold_in(key, 2)
+    with jax.enable_x64():
+        dpp_idx = np.asarray(dpp.select_core_set(key_core, feats, k, method=config.core_method))
+    rand_idx = np.sort(np.asarray(jax.random.choice(jax.random.fold_in(key, 3), len(feats),
+                                                    (k,), replace=False)))
+    core_s = time.perf_counter() - t
+    log(f"core set: k = {k} of {len(feats):,} by k-DPP ({config.core_method}) in {core_s:.1f} s")
+    core = {
+        "dpp_image": image[dpp_idx], "dpp_depth": depth[dpp_idx], "dpp_label": label[dpp_idx],
+        "dpp_index": dpp_idx,
+        "random_image": image[rand_idx], "random_depth": depth[rand_idx],
+        "random_label": label[rand_idx], "random_index": rand_idx,
+    }
+    manifest = {
+        "made_by": "sern grasp dataset, then sern grasp pretrain",
+        "dataset": {"config": dataclasses.asdict(data_config),
+                    "labelled_grasps": int(len(label)),
+                    "positive_fraction": float(label.mean())},
+        "pretrain": dataclasses.asdict(config),
+        "history": history,
+        "heldout": {k2: v for k2, v in metrics.items() if k2 != "reliability"},
+        "core_set": {"k": k, "method": config.core_method,
+                     "dpp_positive_fraction": float(label[dpp_idx].mean()),
+                     "random_positive_fraction": float(label[rand_idx].mean())},
+        "params": qn.param_count(network_config),
+        "flops_per_grasp": qn.flops_per_grasp(network_config),
+        "seconds": {"train": train_s, "heldout": eval_s, "core_set": core_s},
+        "git_commit": io.run_metadata()["git_commit"],
+    }
+    io.save_json(out_dir / "metrics.json", metrics)
+    artifacts.save(out_dir, network, params, core, manifest)
+    return manifest

@@ -44,7 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["CropConfig", "Crops", "extract", "extract_batch", "validate", "sample_grid"]
+__all__ = ["CropConfig", "Crops", "extract", "extract_batch", "sample_grid", "validate"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,15 +70,21 @@ class CropConfig:
         if self.image_shape is not None:
             shape = tuple(self.image_shape)
             if len(shape) != 2 or min(shape) < 1:
-                raise ValueError(f"image_shape must be (H, W), got {self.image_shape!r}")
+                raise ValueError(
+                    f"image_shape must be (H, W), got {self.image_shape!r}"
+                )
             object.__setattr__(self, "image_shape", shape)
 
 
 class Crops(NamedTuple):
     """Network inputs for K candidates (leading batch axes when batched)."""
 
-    image: jax.Array  # [K, S, S] float32: depth - grasp_depth, metres, jaw axis along rows
-    depth: jax.Array  # [K] float32: grasp depth (planar camera depth of the centre), metres
+    image: (
+        jax.Array
+    )  # [K, S, S] float32: depth - grasp_depth, metres, jaw axis along rows
+    depth: (
+        jax.Array
+    )  # [K] float32: grasp depth (planar camera depth of the centre), metres
 
 
 def _unpack(candidates):
@@ -106,7 +112,11 @@ def _check_shapes(depth_shape, center_shape, angle_shape, gdepth_shape, config, 
             f"CropConfig.image_shape {config.image_shape}"
         )
     b = tuple(depth_shape[:lead])
-    if len(center_shape) != lead + 2 or tuple(center_shape[:lead]) != b or center_shape[-1] != 2:
+    if (
+        len(center_shape) != lead + 2
+        or tuple(center_shape[:lead]) != b
+        or center_shape[-1] != 2
+    ):
         raise ValueError(
             f"center_px must be {'[B, K, 2]' if batch else '[K, 2]'} matching the image "
             f"batch, got {tuple(center_shape)} for depth {tuple(depth_shape)}"
@@ -146,7 +156,11 @@ def validate(depth, candidates, config: CropConfig = CropConfig(), batch: bool =
             f"depth image has {int(bad.sum())} non-finite pixel(s), first at {idx}: "
             f"{depth[idx]!r}"
         )
-    for name, value in (("center_px", center), ("angle_px", angle), ("grasp_depth", gdepth)):
+    for name, value in (
+        ("center_px", center),
+        ("angle_px", angle),
+        ("grasp_depth", gdepth),
+    ):
         if not np.all(np.isfinite(value)):
             raise ValueError(f"{name} has non-finite values")
 
@@ -211,8 +225,12 @@ def extract(depth, candidates, config: CropConfig = CropConfig()) -> Crops:
     """
     center, angle, gdepth = _unpack(candidates)
     _check_shapes(
-        jnp.shape(depth), jnp.shape(center), jnp.shape(angle), jnp.shape(gdepth),
-        config, batch=False,
+        jnp.shape(depth),
+        jnp.shape(center),
+        jnp.shape(angle),
+        jnp.shape(gdepth),
+        config,
+        batch=False,
     )
     depth = jnp.asarray(depth, jnp.float32)
     center = jnp.asarray(center, jnp.float32)
@@ -237,8 +255,12 @@ def extract_batch(depth, candidates, config: CropConfig = CropConfig()) -> Crops
     """
     center, angle, gdepth = _unpack(candidates)
     _check_shapes(
-        jnp.shape(depth), jnp.shape(center), jnp.shape(angle), jnp.shape(gdepth),
-        config, batch=True,
+        jnp.shape(depth),
+        jnp.shape(center),
+        jnp.shape(angle),
+        jnp.shape(gdepth),
+        config,
+        batch=True,
     )
     return jax.vmap(lambda d, c, a, g: extract(d, (c, a, g), config))(
         depth, center, angle, gdepth

@@ -47,8 +47,12 @@ def _scipy_affine(image, center, angle, size=_S):
     matrix = np.array([[cos, sin], [-sin, cos]])
     offset = np.array([center[1], center[0]]) - matrix @ np.array([half, half])
     return ndimage.affine_transform(
-        image.astype(np.float64), matrix, offset, output_shape=(size, size),
-        order=1, mode="nearest",
+        image.astype(np.float64),
+        matrix,
+        offset,
+        output_shape=(size, size),
+        order=1,
+        mode="nearest",
     )
 
 
@@ -61,13 +65,14 @@ def _scipy_rotate(image, center, angle, size=_S):
     """
     n = 2 * size
     u0, v0 = center
-    top, left = int(round(v0 - (n - 1) / 2)), int(round(u0 - (n - 1) / 2))
+    top, left = round(v0 - (n - 1) / 2), round(u0 - (n - 1) / 2)
     padded = np.pad(image.astype(np.float64), n, mode="edge")
     window = padded[top + n : top + 2 * n, left + n : left + 2 * n]
     # ndimage.rotate turns content counter-clockwise in (row-down, col-right) display by
     # +angle; content at image angle a (from +u towards +v) must go to angle 0: rotate by +a.
-    rotated = ndimage.rotate(window, math.degrees(angle), reshape=False, order=1,
-                             mode="nearest")
+    rotated = ndimage.rotate(
+        window, math.degrees(angle), reshape=False, order=1, mode="nearest"
+    )
     lo = (n - size) // 2
     return rotated[lo : lo + size, lo : lo + size]
 
@@ -120,8 +125,9 @@ def test_edge_at_known_angle_comes_out_horizontal(angle):
     # Constant along rows (the jaw axis), and equal to the edge profile across them.
     y = np.arange(_S) - (_S - 1) / 2
     profile = -0.05 * np.tanh(y / 6.0)
-    np.testing.assert_allclose(crop, np.broadcast_to(profile[:, None], crop.shape),
-                               rtol=0, atol=3e-4)
+    np.testing.assert_allclose(
+        crop, np.broadcast_to(profile[:, None], crop.shape), rtol=0, atol=3e-4
+    )
     assert crop[-1].mean() < crop[0].mean() - 0.05  # +v side (bottom rows) is nearer
     # Rotating the edge by angle and cropping at angle gives the unrotated crop.
     flat, _ = _edge_image(0.0)
@@ -134,12 +140,21 @@ def test_edge_at_known_angle_comes_out_horizontal(angle):
 
 def test_edge_mode_outside_the_image():
     image = np.arange(96 * 96, dtype=np.float32).reshape(96, 96) / 1e4 + 0.5
-    out = jax.jit(crops.extract)(image, (jnp.array([[0.0, 0.0]]), jnp.zeros(1), jnp.zeros(1)))
+    out = jax.jit(crops.extract)(
+        image, (jnp.array([[0.0, 0.0]]), jnp.zeros(1), jnp.zeros(1))
+    )
     crop = np.asarray(out.image[0])
-    half = _S // 2  # crop pixel half maps to image pixel 0.5: rows/cols < half are off-image
+    half = (
+        _S // 2
+    )  # crop pixel half maps to image pixel 0.5: rows/cols < half are off-image
     np.testing.assert_allclose(crop[:half, :half], image[0, 0], atol=1e-6)
-    np.testing.assert_allclose(crop[:half, half:], np.broadcast_to(
-        _scipy_affine(image, (0.0, 0.0), 0.0)[0, half:], (half, _S - half)), atol=1e-6)
+    np.testing.assert_allclose(
+        crop[:half, half:],
+        np.broadcast_to(
+            _scipy_affine(image, (0.0, 0.0), 0.0)[0, half:], (half, _S - half)
+        ),
+        atol=1e-6,
+    )
     assert np.all(np.isfinite(crop))
 
 
@@ -147,7 +162,9 @@ def test_batched_equals_unbatched(real_images):
     images, cands = real_images
     batched = jax.jit(crops.extract_batch)(images, cands)
     for b in range(2):
-        one = jax.jit(crops.extract)(images[b], jax.tree.map(lambda x: x[b], cands))
+        one = jax.jit(crops.extract)(
+            images[b], jax.tree.map(lambda x, b=b: x[b], cands)
+        )
         np.testing.assert_allclose(batched.image[b], one.image, rtol=0, atol=1e-6)
         np.testing.assert_array_equal(batched.depth[b], one.depth)
 
@@ -170,7 +187,8 @@ def test_bad_input_is_a_clear_error(real_images):
     with pytest.raises(ValueError, match="angle_px must have shape"):
         crops.extract(images[0], (one.center_px, one.angle_px[:5], one.grasp_depth))
     with pytest.raises(ValueError, match="grasp_depth has non-finite"):
-        crops.validate(images[0], (one.center_px, one.angle_px,
-                                   np.full(64, np.nan, np.float32)))
+        crops.validate(
+            images[0], (one.center_px, one.angle_px, np.full(64, np.nan, np.float32))
+        )
     with pytest.raises(ValueError, match="crop_size"):
         crops.CropConfig(crop_size=0)

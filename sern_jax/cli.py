@@ -10,10 +10,12 @@ import argparse
 import importlib
 import sys
 
-__all__ = ["main", "build_parser", "add_regret_parser"]
+__all__ = ["main", "build_parser", "add_regret_parser", "add_reproduce_parser",
+           "add_learn_parser"]
 
 # (module, attribute) contributing top-level commands.
 _TOP_LEVEL = (
+    ("sern_jax.cli", "add_reproduce_parser"),  # sern reproduce (the main job)
     ("sern_jax.cli", "add_regret_parser"),  # sern regret (wires experiments/ and figures/)
     ("proofs_check.cli", "add_parser"),  # sern check
 )
@@ -25,6 +27,10 @@ _BENCH = (
 # Commands under `sern grasp ...`.
 _GRASP = (
     ("sern_jax.grasp.show", "add_parser"),  # sern grasp show
+    ("sern_jax.grasp.learn_cli", "add_dataset_parser"),  # sern grasp dataset
+    ("sern_jax.grasp.learn_cli", "add_pretrain_parser"),  # sern grasp pretrain
+    ("sern_jax.grasp.learn_cli", "add_screen_parser"),  # sern grasp screen
+    ("sern_jax.cli", "add_learn_parser"),  # sern grasp learn (wires figures/)
 )
 
 
@@ -38,6 +44,29 @@ def add_regret_parser(subparsers) -> None:
     regret_cli.add_parser(subparsers, defaults=regret.RegretExperiment(),
                           run_experiment=regret.run_experiment,
                           make_figures=make_regret_figs.make_figures)
+
+
+def add_learn_parser(subparsers) -> None:
+    """``sern grasp learn``, with its figure maker from ``figures/``."""
+    from figures import make_learn_figs
+    from sern_jax.grasp import learn_cli
+
+    learn_cli.add_learn_parser(subparsers, make_figures=make_learn_figs.make_figures)
+
+
+def add_reproduce_parser(subparsers) -> None:
+    """``sern reproduce``: the check runner, the regret experiment and the figure makers are
+    handed to :mod:`sern_jax.reproduce` from the script folders here."""
+    from experiments import regret
+    from figures import make_learn_figs, make_regret_figs
+    from proofs_check import cli as check_cli
+    from sern_jax import reproduce
+
+    reproduce.add_parser(subparsers, check_run=check_cli.run,
+                         regret_defaults=regret.RegretExperiment(),
+                         run_regret=regret.run_experiment,
+                         regret_figures=make_regret_figs.make_figures,
+                         learn_figures=make_learn_figs.make_figures)
 
 
 def _register(subparsers, entries) -> None:
@@ -56,8 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog="sern",
         description=(
             "sern_jax: SERN (Shannon-entropy-regularised neural contextual bandits) in JAX. "
-            "Regret experiments over thousands of seeds, numerical checks of the paper's "
-            "Theorems 1-5, and an MJX grasp simulator."
+            "`sern reproduce` runs the paper end to end (theory checks, regret curves, online "
+            "grasp learning); regret experiments over thousands of seeds, numerical checks of "
+            "the paper's Theorems 1-5, an MJX grasp simulator, a grasp-quality network and "
+            "SERN's online learner."
         ),
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -70,8 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     _register(bench_sub, _BENCH)
     bench.set_defaults(func=lambda args: _missing(bench))
     grasp = sub.add_parser(
-        "grasp", help="grasp simulator tools",
-        description="The MJX grasp simulator: objects, depth images, candidates, trials.",
+        "grasp", help="grasp simulator, quality network and online learning",
+        description=("The grasp pipeline: objects, depth images, candidates, trials (show); "
+                     "pretraining data (dataset), the quality network θ0 and core set "
+                     "(pretrain), the hard-set rule (screen), online learning (learn)."),
     )
     grasp_sub = grasp.add_subparsers(dest="grasp_command", metavar="WHAT")
     _register(grasp_sub, _GRASP)

@@ -22,6 +22,8 @@ __all__ = [
     "peak_rss_mb",
     "make_run_dir",
     "save_json",
+    "save_text",
+    "save_bytes",
     "load_json",
     "save_npz",
     "load_npz",
@@ -78,6 +80,16 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, float) and not np.isfinite(obj):
         return str(obj)
     return obj
+
+
+def save_text(path: str | os.PathLike, text: str) -> None:
+    """Writes ``text`` (UTF-8), atomically."""
+    _atomic_write_bytes(Path(path), text.encode())
+
+
+def save_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Writes ``data``, atomically."""
+    _atomic_write_bytes(Path(path), data)
 
 
 def save_json(path: str | os.PathLike, obj: Any) -> None:

@@ -35,12 +35,16 @@ __all__ = [
     "load_theta0",
     "core_set_data",
     "CORE_SET_KINDS",
+    "install",
+    "hard_set",
 ]
 
 DATA_DIR = Path(__file__).resolve().with_name("data")
 THETA0_FILE = "theta0.msgpack"
 CORE_FILE = "core_set.npz"
 MANIFEST_FILE = "manifest.json"
+SCREEN_FILE = "screen.json"
+FILES = (THETA0_FILE, CORE_FILE, MANIFEST_FILE, SCREEN_FILE)
 CORE_SET_KINDS = ("dpp", "random", "none")
 
 
@@ -52,6 +56,7 @@ class Theta0(NamedTuple):
     core: dict  # {"dpp_image" [k, S, S], "dpp_depth" [k], "dpp_label" [k], "random_*" ...}
     manifest: dict
     fingerprint: str  # sha256 of the serialised params (16 hex digits)
+    screen: dict | None = None  # the hard-set screen made with this θ0 (screen.json)
 
 
 def _config_from(manifest: dict) -> qn.QualityNetConfig:
@@ -74,7 +79,7 @@ def save(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     blob = serialization.to_bytes(jax.device_get(params))
-    io._atomic_write_bytes(out_dir / THETA0_FILE, blob)
+    io.save_bytes(out_dir / THETA0_FILE, blob)
     stored = {k: (np.asarray(v, np.float16) if k.endswith("_image") else np.asarray(v))
               for k, v in core.items()}
     io.save_npz(out_dir / CORE_FILE, **stored)
@@ -106,7 +111,8 @@ def _load(path: str) -> Theta0:
     params = serialization.from_bytes(template, blob)
     params = jax.tree.map(jnp.asarray, params)
     core = io.load_npz(root / CORE_FILE)
-    return Theta0(network, params, core, manifest, digest[:16])
+    screen = io.load_json(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
+    return Theta0(network, params, core, manifest, digest[:16], screen)
 
 
 def load_theta0(path: str | Path | None = None) -> Theta0:
@@ -127,3 +133,38 @@ def core_set_data(kind: str, theta0: Theta0) -> qn.TrainData:
     return qn.TrainData(image, np.asarray(c[f"{kind}_depth"], np.float32),
                         np.asarray(c[f"{kind}_label"], np.float32),
                         np.ones(len(image), np.float32))
+
+
+def install(src_dir: str | Path, dst_dir: str | Path = DATA_DIR) -> Path:
+    """Copies θ0, the core sets, the manifest and the screen from a pretrain run directory
+    into ``dst_dir`` (default: the package data that ``load_theta0()`` reads)."""
+    src, dst = Path(src_dir), Path(dst_dir)
+    missing = [f for f in FILES if not (src / f).exists()]
+    if missing:
+        raise ValueError(f"{src} lacks {', '.join(missing)}: run `sern grasp pretrain` first")
+    for f in FILES:
+        io.save_bytes(dst / f, (src / f).read_bytes())
+    _load.cache_clear()
+    return dst
+
+
+def hard_set(theta0: Theta0, num: int = 6) -> dict:
+    """The objects the online experiments use, from the screen shipped with θ0.
+
+    The rule (``pretrain.HARD_RULE``): θ0's greedy choice succeeds at most 60 % of the time
+    while the best candidate succeeds at least 80 %. When fewer than ``num`` objects meet it,
+    the set is filled with the objects of lowest θ0 greedy success among those whose best
+    candidate succeeds at least 80 % (so there is something to learn), and
+    ``meets_rule`` says which ones are which.
+
+    Returns:
+      {"objects": [names], "meets_rule": [bools], "rows": [screen rows of those objects]}.
+    """
+    if not theta0.screen:
+        raise ValueError("this θ0 has no screen.json: run `sern grasp screen --json-out "
+                         "DIR/screen.json` for its directory, or name the objects")
+    rows = [r for r in theta0.screen["objects"] if r["best_success"] >= 0.8]
+    rows.sort(key=lambda r: (not r["hard"], r["greedy_success"], r["object"]))
+    chosen = rows[:num]
+    return {"objects": [r["object"] for r in chosen],
+            "meets_rule": [bool(r["hard"]) for r in chosen], "rows": chosen}

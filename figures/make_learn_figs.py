@@ -1,0 +1,108 @@
+"""Figures of a ``sern grasp learn`` run, from its saved ``results.npz`` and ``config.json``.
+
+* ``figures/success.png``: per object, greedy success per round (round 0 = θ0) for each policy,
+  mean over seeds with a 95 % band (normal approximation over seeds), the paper's 5-grasp
+  evaluation solid and the low-variance evaluation dashed where it was run.
+* ``figures/paired.png``: per object and pooled, the final-round difference SERN − peer
+  (low-variance evaluation where available) with paired 95 % confidence intervals over seeds.
+
+No numerics beyond means and intervals of the saved per-seed figures.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["make_figures"]
+
+
+def _band(x: np.ndarray):
+    """Mean and 95 % half-width over the last axis (seeds)."""
+    n = x.shape[-1]
+    mean = x.mean(-1)
+    half = 1.96 * x.std(-1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
+    return mean, half
+
+
+def make_figures(run_dir: str | Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sern_jax import io
+
+    run_dir = Path(run_dir)
+    res = io.load_npz(run_dir / "results.npz")
+    cfg = io.load_json(run_dir / "config.json")
+    objects = cfg["objects"]
+    policies = cfg["config"]["policies"]
+    paper = 100 * res["paper_eval"]  # [R+1, O, Q, S]
+    lowvar = 100 * res["lowvar_eval"]
+    has_lv = np.isfinite(lowvar).all()
+    rounds = np.arange(paper.shape[0])
+    num_o = len(objects)
+    cols = min(num_o, 3)
+    rows = int(np.ceil(num_o / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    colours = {"sern": "C3", "sern_log": "C1", "egreedy": "C0", "greedy": "C2"}
+    for o, name in enumerate(objects):
+        ax = axes[o // cols][o % cols]
+        for q, pol in enumerate(policies):
+            c = colours.get(pol, f"C{q + 4}")
+            m, h = _band(paper[:, o, q, :])
+            ax.plot(rounds, m, "-o", color=c, ms=3, label=f"{pol} (paper eval)")
+            ax.fill_between(rounds, m - h, m + h, color=c, alpha=0.12)
+            if has_lv:
+                m, h = _band(lowvar[:, o, q, :])
+                ax.plot(rounds, m, "--", color=c, lw=1.2, label=f"{pol} (low-variance)")
+                ax.fill_between(rounds, m - h, m + h, color=c, alpha=0.08)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("round (0 = θ0)")
+        ax.set_ylabel("greedy success %")
+        ax.set_ylim(-5, 105)
+        ax.set_xticks(rounds)
+    for k in range(num_o, rows * cols):
+        axes[k // cols][k % cols].axis("off")
+    axes[0][0].legend(fontsize=6, loc="lower right")
+    seeds = paper.shape[-1]
+    fig.suptitle(f"Greedy success per round, mean over {seeds} seeds, 95% bands", fontsize=11)
+    fig.tight_layout()
+    out = [run_dir / "figures" / "success.png"]
+    out[0].parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out[0], dpi=120)
+    plt.close(fig)
+
+    if "sern" in policies and len(policies) > 1 and seeds > 1:
+        metric = lowvar if has_lv else paper
+        label = "low-variance evaluation" if has_lv else "paper evaluation (5 grasps)"
+        s = policies.index("sern")
+        peers = [q for q in range(len(policies)) if q != s]
+        fig, ax = plt.subplots(figsize=(6.5, 0.45 * (num_o + 1) * len(peers) + 1.2))
+        y, ticks = 0, []
+        for q in peers:
+            for o in list(range(num_o)) + [None]:
+                if o is None:
+                    d = (metric[-1, :, s, :] - metric[-1, :, q, :]).mean(0)  # pooled per seed
+                    name = "pooled"
+                else:
+                    d = metric[-1, o, s, :] - metric[-1, o, q, :]
+                    name = objects[o]
+                m, h = _band(d)
+                ax.errorbar(m, y, xerr=h, fmt="o", color="C3" if o is None else "k", ms=4)
+                ticks.append((y, f"SERN − {policies[q]}: {name}"))
+                y += 1
+            y += 0.5
+        ax.axvline(0, color="grey", lw=0.8)
+        ax.set_yticks([t[0] for t in ticks], [t[1] for t in ticks], fontsize=7)
+        ax.invert_yaxis()
+        ax.set_xlabel(f"final-round success difference, percentage points ({label})")
+        ax.set_title("Paired differences over seeds (common random numbers), 95% CI",
+                     fontsize=9)
+        fig.tight_layout()
+        out.append(run_dir / "figures" / "paired.png")
+        fig.savefig(out[-1], dpi=120)
+        plt.close(fig)
+    return out

@@ -1,0 +1,340 @@
+"""``sern grasp dataset | pretrain | screen | learn``: arguments only; work happens in
+:mod:`dataset`, :mod:`pretrain` and :mod:`online` (imported inside each command, so
+``sern --help`` stays instant). Figures are handed in by :mod:`sern_jax.cli`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+from typing import Callable
+
+__all__ = [
+    "add_dataset_parser",
+    "add_pretrain_parser",
+    "add_screen_parser",
+    "add_learn_parser",
+    "run_learn",
+    "format_table",
+]
+
+_FMT = argparse.ArgumentDefaultsHelpFormatter
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _check_out(path: str | None, what: str = "--out") -> None:
+    if path is None:
+        return
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{what} {path} exists and is not a directory")
+    parent = p if p.exists() else p.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{what} {path}: {parent} is not writable")
+
+
+# ----------------------------------------------------------------------------- dataset
+
+
+def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "dataset", formatter_class=_FMT,
+        help="simulate the pretraining data D0 (labelled grasps of many objects)",
+        description=(
+            "Simulates the 64 antipodal candidates of --poses resting poses of --objects "
+            "procedural training objects, one randomised trial per valid candidate (the label "
+            "a robot would see: 1 success, 0 failure), and stores depth images, candidates and "
+            "labels in npz shards. Deterministic given --seed; an interrupted run resumes from "
+            "the finished shards. The defaults give 204,800 candidate slots (~200k labelled "
+            "grasps)."))
+    p.add_argument("--objects", type=_positive_int, default=200, help="training objects")
+    p.add_argument("--poses", type=_positive_int, default=16, help="resting poses per object")
+    p.add_argument("--trials", type=_positive_int, default=1,
+                   help="trials per grasp (1 = one Bernoulli label; more = frequencies)")
+    p.add_argument("--backend", choices=("native", "mjx"), default="native")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs/d0", help="dataset directory")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_run_dataset)
+    return p
+
+
+def _run_dataset(args) -> int:
+    _check_out(args.out)
+    from sern_jax.grasp import dataset
+
+    config = dataset.DatasetConfig(seed=args.seed, num_objects=args.objects,
+                                   poses_per_object=args.poses, trials_per_grasp=args.trials,
+                                   backend=args.backend)
+    summary = dataset.generate(config, args.out, progress=not args.no_progress)
+    print(json.dumps(summary, indent=2))
+    print(f"dataset directory: {args.out}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- pretrain
+
+
+def add_pretrain_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "pretrain", formatter_class=_FMT,
+        help="train θ0 on D0, evaluate on held-out objects, pick the DPP core set",
+        description=(
+            "Trains the quality network on a D0 made by `sern grasp dataset` (Adam, BCE; a "
+            "checkpoint per epoch, so an interrupted run resumes), reports ROC-AUC, accuracy "
+            "and calibration (ECE, reliability diagram) on procedural objects never seen in "
+            "training against success frequencies from --heldout-trials trials, picks the core "
+            "set C (k-DPP on the network's features) and a random core set of the same size, "
+            "and screens the named objects with the hard-set rule. --install copies θ0, the "
+            "core sets, the screen and the manifest into the package (sern_jax/grasp/data)."))
+    p.add_argument("--data", default="runs/d0", help="dataset directory")
+    p.add_argument("--out", default="runs/theta0", help="output directory")
+    p.add_argument("--epochs", type=_positive_int, default=8)
+    p.add_argument("--batch-size", type=_positive_int, default=128)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--loss", choices=("bce", "l1"), default="bce")
+    p.add_argument("--heldout-objects", type=_positive_int, default=12)
+    p.add_argument("--heldout-poses", type=_positive_int, default=4)
+    p.add_argument("--heldout-trials", type=_positive_int, default=16)
+    p.add_argument("--core-k", type=_positive_int, default=172)
+    p.add_argument("--screen-poses", type=_positive_int, default=8)
+    p.add_argument("--screen-trials", type=_positive_int, default=8)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--install", action="store_true",
+                   help="copy the result into the package data (what `sern grasp learn` uses)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_run_pretrain)
+    return p
+
+
+def _run_pretrain(args) -> int:
+    _check_out(args.out)
+    if not Path(args.data, "config.json").exists():
+        raise ValueError(f"--data {args.data} is not a dataset directory; make one with "
+                         "`sern grasp dataset --out DIR`")
+    if not (args.lr > 0):
+        raise ValueError(f"--lr must be > 0, got {args.lr}")
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, objects, pretrain
+
+    config = pretrain.PretrainConfig(
+        epochs=args.epochs, batch_size=args.batch_size, learning_rate=args.lr, loss=args.loss,
+        seed=args.seed, heldout_objects=args.heldout_objects,
+        heldout_poses=args.heldout_poses, heldout_trials=args.heldout_trials,
+        core_k=args.core_k)
+    manifest = pretrain.pretrain(args.data, config, args.out, progress=not args.no_progress)
+    theta0 = artifacts.load_theta0(args.out)
+    specs = [objects.make_object(n) for n in objects.object_names()]
+    rows = pretrain.screen(theta0.network, theta0.params, specs, args.screen_poses,
+                           args.screen_trials, progress=not args.no_progress)
+    io.save_json(Path(args.out) / "screen.json", {"rule": pretrain.HARD_RULE, "objects": rows})
+    _print_screen(rows)
+    print(json.dumps(manifest["heldout"] | {"objects": None}, indent=2))
+    if args.install:
+        artifacts.install(args.out)
+        print(f"installed into {artifacts.DATA_DIR}")
+    return 0
+
+
+def _print_screen(rows) -> None:
+    print(f"{'object':>20s}  θ0 greedy  best  mean  hard")
+    for r in rows:
+        print(f"{r['object']:>20s}  {r['greedy_success']:9.2f}  {r['best_success']:4.2f}  "
+              f"{r['mean_success']:4.2f}  {'yes' if r['hard'] else ''}")
+
+
+# ----------------------------------------------------------------------------- screen
+
+
+def add_screen_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "screen", formatter_class=_FMT,
+        help="the hard-set rule: θ0's greedy success vs the best candidate's, per object",
+        description=(
+            "For each object: over --poses random resting poses, the success frequency "
+            "(--trials trials) of θ0's greedy choice and of the best of the 64 candidates. An "
+            "object is hard when θ0's greedy choice succeeds at most 60%% of the time while "
+            "the best candidate succeeds at least 80%% of the time."))
+    p.add_argument("objects", nargs="*", metavar="OBJECT",
+                   help="object names (default: every named object)")
+    p.add_argument("--mesh", action="append", default=[], metavar="PATH")
+    p.add_argument("--poses", type=_positive_int, default=8)
+    p.add_argument("--trials", type=_positive_int, default=8)
+    p.add_argument("--theta0", default=None, help="θ0 directory (default: the shipped one)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json-out", default=None)
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_run_screen)
+    return p
+
+
+def _specs(names, meshes, default_names):
+    from sern_jax.grasp import objects
+
+    names = list(names) or ([] if meshes else list(default_names))
+    specs = [objects.resolve_object(n) for n in names]
+    specs += [objects.load_mesh(m) for m in meshes]
+    if not specs:
+        raise ValueError("no objects given")
+    seen = set()
+    for s in specs:
+        if s.name in seen:
+            raise ValueError(f"object {s.name!r} given twice")
+        seen.add(s.name)
+    return specs
+
+
+def _run_screen(args) -> int:
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, objects, pretrain
+
+    theta0 = artifacts.load_theta0(args.theta0)
+    specs = _specs(args.objects, args.mesh, objects.object_names())
+    rows = pretrain.screen(theta0.network, theta0.params, specs, args.poses, args.trials,
+                           seed=args.seed, progress=not args.no_progress)
+    _print_screen(rows)
+    if args.json_out:
+        io.save_json(args.json_out, {"rule": pretrain.HARD_RULE, "objects": rows})
+    return 0
+
+
+# ----------------------------------------------------------------------------- learn
+
+
+def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "learn", formatter_class=_FMT,
+        help="online SERN grasp learning (Algorithm 1) and the paper's Table I",
+        description=(
+            "Fine-tunes the shipped θ0 online on each object with each policy and seed: rounds "
+            "of --explore grasps (each on a fresh resting pose, chosen by the policy over the "
+            "valid candidates), an optax update on the collected data plus the core set, and "
+            "--evaluate greedy grasps (the paper's evaluation) plus a low-variance evaluation "
+            "(--eval-poses fixed poses x --eval-trials trials). Writes table.md / table.json in "
+            "the paper's Table I format, results.npz, figures and a checkpoint per round (an "
+            "interrupted run resumes). Default objects: the hard set chosen by the screen "
+            "shipped with θ0. Policies: sern (softmax, --alpha), sern_log (softmax with "
+            "Algorithm 1's alpha0/ln(T^p)), egreedy (--epsilon), greedy."))
+    p.add_argument("objects", nargs="*", metavar="OBJECT",
+                   help="object names or .obj/.stl paths (default: the hard set)")
+    p.add_argument("--mesh", action="append", default=[], metavar="PATH",
+                   help="an OBJ/STL mesh (repeatable); any mesh `sern grasp show` takes")
+    p.add_argument("--policies", default="sern,egreedy,greedy")
+    p.add_argument("--seeds", type=_positive_int, default=5)
+    p.add_argument("--rounds", type=_positive_int, default=5)
+    p.add_argument("--explore", type=_positive_int, default=20)
+    p.add_argument("--evaluate", type=_positive_int, default=5)
+    p.add_argument("--alpha", type=float, default=0.05)
+    p.add_argument("--epsilon", type=float, default=0.1)
+    p.add_argument("--alpha0", type=float, default=1.0, help="sern_log's alpha0")
+    p.add_argument("--p", type=float, default=0.3, help="sern_log's p")
+    p.add_argument("--eval-poses", type=int, default=4,
+                   help="fixed poses of the low-variance evaluation (0 = off)")
+    p.add_argument("--eval-trials", type=int, default=8)
+    p.add_argument("--fit-steps", type=_positive_int, default=40)
+    p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp")
+    p.add_argument("--loss", choices=("bce", "l1"), default="bce")
+    p.add_argument("--theta0", default=None, help="θ0 directory (default: the shipped one)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="run directory (default runs/learn-<hash>)")
+    p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
+    p.add_argument("--no-figures", action="store_true")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=lambda args: run_learn(args, make_figures=make_figures))
+    return p
+
+
+def _pct(v) -> str:
+    return "—" if v is None else f"{v:.0f}%"
+
+
+def format_table(rows: list[dict]) -> str:
+    """The paper's Table I layout: Round i mean (± std over seeds), Max, Imprv."""
+    num_r = len(rows[0]["rounds"])
+    head = (["Obj.", "Alg.", "θ0"] + [f"Round {i + 1}" for i in range(num_r)]
+            + ["Max.", "Imprv."])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["object"], r["policy"], _pct(r["theta0"])]
+        cells += [f"{m:.0f}% (±{s:.2f})" for m, s in zip(r["rounds"], r["std"])]
+        cells += [_pct(r["max"]), "—" if r["imprv"] is None else f"{100 * r['imprv']:.0f}%"]
+        lines.append("| " + " | ".join(cells) + " |")
+    if "lowvar_rounds" in rows[0]:
+        lines += ["", "Low-variance evaluation (greedy success probability on fixed poses, "
+                  "mean over seeds; round 0 = θ0):", ""]
+        head = ["Obj.", "Alg."] + [f"R{i}" for i in range(num_r + 1)]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in rows:
+            cells = [r["object"], r["policy"]] + [
+                f"{m:.0f}% (±{s:.1f})" for m, s in zip(r["lowvar_rounds"], r["lowvar_std"])]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
+    _check_out(args.out)
+    if args.json_out and Path(args.json_out).is_dir():
+        raise ValueError(f"--json-out {args.json_out} is a directory")
+    from sern_jax.grasp import online
+
+    policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
+    config = online.OnlineConfig(
+        policies=policies, num_seeds=args.seeds, rounds=args.rounds, explore=args.explore,
+        evaluate=args.evaluate, alpha=args.alpha, epsilon=args.epsilon, alpha0=args.alpha0,
+        p=args.p, eval_poses=args.eval_poses, eval_trials=args.eval_trials,
+        fit_steps=args.fit_steps, core_set=args.core_set, loss=args.loss, seed=args.seed)
+    from sern_jax import io
+    from sern_jax.grasp import artifacts
+
+    theta0 = artifacts.load_theta0(args.theta0)
+    specs = _specs(args.objects, args.mesh, artifacts.hard_set(theta0)["objects"])
+    t0 = time.perf_counter()
+    out = Path(args.out) if args.out else Path("runs") / (
+        "learn-" + online.run_fingerprint(config, [s.name for s in specs], theta0))
+    res = online.run(config, specs, out, theta0=theta0, progress=not args.no_progress, log=log)
+    seconds = time.perf_counter() - t0
+    write_learn_outputs(out, res, seconds, theta0)
+    table = format_table(res["table"])
+    print(table)
+    if not args.no_figures and make_figures is not None:
+        for path in make_figures(out):
+            print(f"wrote {path}")
+    if args.json_out:
+        io.save_json(args.json_out, {"table": res["table"], "seconds": seconds,
+                                     "machine": io.run_metadata()["host"]})
+    print(f"run directory: {out}  ({seconds:.0f} s)")
+    return 0
+
+
+def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
+    """config.json, metadata.json, results.npz, table.md/json, report.md of a learn run."""
+    from sern_jax import io
+
+    io.save_json(out / "config.json", {"config": res["config"], "objects": res["objects"],
+                                       "theta0": theta0.fingerprint,
+                                       "fingerprint": res["fingerprint"]})
+    io.save_json(out / "metadata.json", io.run_metadata(timings=res["timings"],
+                                                         seconds=seconds))
+    io.save_npz(out / "results.npz", **res["results"]._asdict())
+    io.save_json(out / "table.json", {"table": res["table"], "seconds": seconds})
+    table = format_table(res["table"])
+    io.save_text(out / "table.md", table + "\n")
+    t = res["timings"]
+    total = sum(t.values()) or 1.0
+    split = ", ".join(f"{k} {v:.0f} s ({100 * v / total:.0f}%)" for k, v in t.items())
+    io.save_text(out / "report.md",
+                 f"# Online grasp learning\n\n{table}\n\nWall time {seconds:.0f} s; where it "
+                 f"went: {split}.\n")

@@ -1,0 +1,522 @@
+"""Algorithm 1 for grasping: online fine-tuning of the quality network by SERN and its peers.
+
+One *round* (the paper's Section VI) for every (object, seed, policy) at once:
+
+1. **exploration**: ``explore`` grasps, each on a fresh random resting pose of the object:
+   depth image -> 64 candidates -> crops -> r̂ = θ's success probabilities -> the policy's
+   distribution over the *valid* candidates -> one grasp -> a randomised trial -> reward,
+   stored with its crop in the policy's own data set D;
+2. **update**: θ is trained (optax, a few minibatch steps) on D ∪ C, C the shipped core set;
+3. **evaluation**: ``evaluate`` greedy grasps on fresh poses (the paper's noisy 0/20/40/...%
+   figure), plus a low-variance figure: the greedy grasp's success probability from
+   ``eval_trials`` trials on each of ``eval_poses`` fixed poses per seed.
+
+Round 0 evaluates θ0 before any learning (the baseline the paper's Table I leaves out).
+
+Policies (choices come from :mod:`sern_jax.policies` with the candidates' validity mask):
+``sern`` softmax(r̂/α) with the paper's α = 0.05; ``sern_log`` softmax with Algorithm 1's
+α = α0/ln(T^p), T = rounds × explore; ``egreedy`` ε-greedy (ε = 0.1); ``greedy``.
+
+Batching: everything from depth image to policy is one jitted call over objects × seeds ×
+policies × grasps; the θ updates are one jitted call vmapped over the O × S × Q parameter
+copies. Physics runs on the native MuJoCo backend (CPU) or MJX.
+
+Common random numbers: within a seed, every policy sees the same poses, the same candidate
+sets, the same policy uniform and the same trial randomisation (friction, mass, execution
+error), so policy comparisons are paired. Keys: object ``o`` (by name, CRC32) and seed ``s``
+use ``key_os = fold_in(fold_in(key(seed), crc32(name)), s)``; each stream below is
+``fold_in(key_os, STREAM)``, then ``fold_in(., round)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import time
+import zlib
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from sern_jax import io
+from sern_jax import policies as pol
+from sern_jax import schedules
+from sern_jax.grasp import artifacts
+from sern_jax.grasp import context as context_lib
+from sern_jax.grasp import crops as crops_lib
+from sern_jax.grasp import objects as objects_lib
+from sern_jax.grasp import quality_net as qn
+from sern_jax.grasp import sim as sim_lib
+
+__all__ = [
+    "POLICIES",
+    "OnlineConfig",
+    "RoundResults",
+    "object_key",
+    "make_choose",
+    "run",
+    "run_fingerprint",
+    "table_rows",
+]
+
+POLICIES = ("sern", "sern_log", "egreedy", "greedy")
+EXPLORE_CONTEXT, EXPLORE_TRIAL, POLICY_UNIFORM, FIT = 0, 1, 2, 3
+EVAL_CONTEXT, EVAL_TRIAL, EVAL_UNIFORM, LOWVAR_CONTEXT, LOWVAR_TRIAL = 4, 5, 6, 7, 8
+
+
+@dataclasses.dataclass(frozen=True)
+class OnlineConfig:
+    """The online learning experiment (defaults: the paper's Section VI setting).
+
+    Attributes:
+      policies: subset of ``POLICIES``.
+      num_seeds: S independent runs per (object, policy).
+      rounds: R rounds of exploration + update + evaluation.
+      explore: grasps per exploration phase (paper: 20).
+      evaluate: greedy grasps per evaluation phase (paper: 5).
+      alpha: SERN's temperature (paper: 0.05).
+      epsilon: ε of ε-greedy (paper: 0.1).
+      alpha0, p: Algorithm 1's schedule α = α0/ln(T^p) for ``sern_log``.
+      fit_steps, batch_size, learning_rate: the optax (Adam) update after each exploration.
+      loss: ``"bce"`` (default) or ``"l1"`` (the printed Algorithm 1, a negative control).
+      core_set: ``"dpp"`` (shipped), ``"random"`` (same size, uniform from D0's sample) or
+        ``"none"``.
+      eval_poses, eval_trials: the low-variance evaluation (0 poses = off).
+      seed: root seed.
+      backend: physics backend for trials.
+    """
+
+    policies: tuple[str, ...] = ("sern", "egreedy", "greedy")
+    num_seeds: int = 5
+    rounds: int = 5
+    explore: int = 20
+    evaluate: int = 5
+    alpha: float = 0.05
+    epsilon: float = 0.1
+    alpha0: float = 1.0
+    p: float = 0.3
+    fit_steps: int = 40
+    batch_size: int = 32
+    learning_rate: float = 3e-4
+    loss: str = "bce"
+    core_set: str = "dpp"
+    eval_poses: int = 4
+    eval_trials: int = 8
+    seed: int = 0
+    backend: str = "native"
+
+    def __post_init__(self):
+        pols = tuple(self.policies)
+        object.__setattr__(self, "policies", pols)
+        if not pols:
+            raise ValueError(f"policies must not be empty; choose from {POLICIES}")
+        for name in pols:
+            if name not in POLICIES:
+                raise ValueError(f"unknown policy {name!r}; choose from {', '.join(POLICIES)}")
+        if len(set(pols)) != len(pols):
+            raise ValueError(f"policies must not repeat, got {pols}")
+        for name in ("num_seeds", "rounds", "explore", "evaluate", "fit_steps", "batch_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        for name in ("eval_poses", "eval_trials"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        if self.num_seeds * self.rounds * self.explore > 10_000_000:
+            raise ValueError("num_seeds x rounds x explore exceeds 10M grasps per object")
+        if not (np.isfinite(self.alpha) and self.alpha > 0):
+            raise ValueError(f"alpha must be > 0, got {self.alpha!r}")
+        if not (np.isfinite(self.epsilon) and 0 <= self.epsilon <= 1):
+            raise ValueError(f"epsilon must be in [0, 1], got {self.epsilon!r}")
+        if not (np.isfinite(self.alpha0) and self.alpha0 > 0):
+            raise ValueError(f"alpha0 must be > 0, got {self.alpha0!r}")
+        if not (0 < self.p < 1):
+            raise ValueError(f"p must be in (0, 1), got {self.p!r}")
+        if not (np.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
+        if self.loss not in qn.LOSSES:
+            raise ValueError(f"loss must be one of {qn.LOSSES}, got {self.loss!r}")
+        if self.core_set not in ("dpp", "random", "none"):
+            raise ValueError(f"core_set must be dpp, random or none, got {self.core_set!r}")
+        if self.backend not in sim_lib.BACKENDS:
+            raise ValueError(f"backend must be one of {sim_lib.BACKENDS}, got {self.backend!r}")
+        if not 0 <= int(self.seed) < 2**31:
+            raise ValueError(f"seed must be in [0, 2**31), got {self.seed}")
+        if self.eval_trials == 0 and self.eval_poses > 0:
+            raise ValueError("eval_trials must be >= 1 when eval_poses > 0")
+
+    @property
+    def horizon(self) -> int:
+        """T of Algorithm 1's schedule: exploration grasps over the whole run."""
+        return self.rounds * self.explore
+
+    def policy_alpha(self, name: str) -> float:
+        """The temperature a softmax policy uses (NaN for the others)."""
+        if name == "sern":
+            return float(self.alpha)
+        if name == "sern_log":
+            return float(schedules.alpha_of_horizon("log", self.horizon, self.alpha0, self.p))
+        return float("nan")
+
+    def fingerprint(self) -> str:
+        d = dataclasses.asdict(self)
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+# ----------------------------------------------------------------------------- keys
+
+
+def object_key(root: jax.Array, name: str, seed_index: int) -> jax.Array:
+    """The key of (object, seed): independent of which other objects run beside it."""
+    return jax.random.fold_in(
+        jax.random.fold_in(root, zlib.crc32(name.encode()) & 0x7FFFFFFF), seed_index)
+
+
+def _stream(key_os: jax.Array, stream: int, round_index: int) -> jax.Array:
+    return jax.random.fold_in(jax.random.fold_in(key_os, stream), round_index)
+
+
+# ----------------------------------------------------------------------------- jitted steps
+
+
+def _policy_probs(name: str, r_hat, valid, alpha, epsilon):
+    if name in ("sern", "sern_log"):
+        return pol.softmax_probs(r_hat, alpha, mask=valid)
+    if name == "egreedy":
+        return pol.epsilon_greedy_probs(r_hat, epsilon, mask=valid)
+    return pol.greedy_probs(r_hat, mask=valid)
+
+
+def make_choose(network, policies: tuple[str, ...], crop_config=crops_lib.CropConfig()):
+    """The jitted step from depth images to chosen grasps, for every policy copy.
+
+    Returns ``choose(params, depth, candidates, u, alphas, epsilon)``:
+      params: network params with leading [Q] (one copy per policy);
+      depth: [N, H, W] images; candidates: Candidates with leading [N] (K slots);
+      u: [N] uniforms (shared by the policies: common random numbers);
+      alphas: [Q] temperatures; epsilon: [].
+    and returns (action [Q, N] int32 candidate index, -1 if no candidate is valid;
+    r_hat [Q, N, K]; probs [Q, N, K]; crops image [N, K, S, S] and depth [N, K]).
+    The caller vmaps it over objects and seeds.
+    """
+
+    def choose(params, depth, candidates, u, alphas, epsilon):
+        crops = crops_lib.extract_batch(depth, candidates, crop_config)
+        valid = candidates.valid
+        actions, r_hats, probs_all = [], [], []
+        for q, name in enumerate(policies):
+            p_q = jax.tree.map(lambda x, q=q: x[q], params)
+            r_hat = network.apply(p_q, crops.image, crops.depth)  # [N, K]
+            probs = jax.vmap(lambda r, m: _policy_probs(name, r, m, alphas[q], epsilon))(
+                r_hat, valid)
+            actions.append(jax.vmap(lambda uu, pp, m: pol.sample_icdf(uu, pp, mask=m))(
+                u, probs, valid))
+            r_hats.append(r_hat)
+            probs_all.append(probs)
+        return jnp.stack(actions), jnp.stack(r_hats), jnp.stack(probs_all), crops
+
+    return choose
+
+
+@functools.lru_cache(maxsize=None)
+def _batched_choose(network, policies, crop_config):
+    # params [O, S, Q, ...]; depth [O, S, N, H, W]; candidates [O, S, N, K, ...];
+    # u [O, S, N]; alphas [Q]; epsilon [].
+    one = make_choose(network, policies, crop_config)
+    per_seed = jax.vmap(one, (0, 0, 0, 0, None, None))
+    return jax.jit(jax.vmap(per_seed, (0, 0, 0, 0, None, None)))
+
+
+@functools.lru_cache(maxsize=None)
+def _batched_fit(network, config: OnlineConfig):
+    optimizer = optax.adam(config.learning_rate)
+    fit = qn.make_fit(network, optimizer, loss=config.loss, batch_size=config.batch_size,
+                      num_steps=config.fit_steps)
+
+    def one(key, params, opt_state, buffer, core):
+        data = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), buffer, core)
+        return fit(key, params, opt_state, data)
+
+    # keys [O, S]; params/opt_state [O, S, Q]; buffer [O, S, Q, cap]; core shared.
+    over_q = jax.vmap(one, (None, 0, 0, 0, None))
+    over_s = jax.vmap(over_q, (0, 0, 0, 0, None))
+    return jax.jit(jax.vmap(over_s, (0, 0, 0, 0, None))), optimizer
+
+
+# ----------------------------------------------------------------------------- results
+
+
+class RoundResults(NamedTuple):
+    """Success figures with axes [R + 1, O, Q, S] (round 0 = θ0 before learning)."""
+
+    paper_eval: np.ndarray  # fraction of `evaluate` greedy grasps that succeeded
+    lowvar_eval: np.ndarray  # mean greedy success probability over the fixed eval poses
+    explore_success: np.ndarray  # fraction of exploration grasps that succeeded (round 0: NaN)
+
+
+def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.ndarray,
+               lowvar_eval: np.ndarray | None = None) -> list[dict]:
+    """Table I rows: per object and policy, round 1..R success mean ± std over seeds (%),
+    Max over rounds and Imprv = (r_R - r_1)/r_1 (the paper's definition)."""
+    rows = []
+    for o, name in enumerate(objects):
+        for q, policy in enumerate(policies):
+            x = 100.0 * paper_eval[1:, o, q, :]  # [R, S]
+            mean, std = x.mean(1), x.std(1)
+            r1, rr = mean[0], mean[-1]
+            row = {
+                "object": name,
+                "policy": policy,
+                "theta0": float(100.0 * paper_eval[0, o, q, :].mean()),
+                "rounds": [float(v) for v in mean],
+                "std": [float(v) for v in std],
+                "max": float(mean.max()),
+                "imprv": float((rr - r1) / r1) if r1 > 0 else None,
+            }
+            if lowvar_eval is not None and np.isfinite(lowvar_eval).all():
+                lv = 100.0 * lowvar_eval[:, o, q, :]
+                row["lowvar_rounds"] = [float(v) for v in lv.mean(1)]
+                row["lowvar_std"] = [float(v) for v in lv.std(1)]
+            rows.append(row)
+    return rows
+
+
+# ----------------------------------------------------------------------------- the run
+
+
+def run_fingerprint(config: OnlineConfig, names: list[str], theta0) -> str:
+    """What determines a run's results: the config, the objects and θ0."""
+    text = config.fingerprint() + json.dumps(list(names)) + theta0.fingerprint
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+
+def _contexts(key, spec, num, model):
+    """Contexts of one object as numpy (poses [n, 7], depth [n, H, W], candidates [n, K])."""
+    ctx = context_lib.make_contexts(key, spec, num, model=model)
+    return ctx.poses, ctx.depth, ctx.candidates
+
+
+def _stack(items):
+    return jax.tree.map(lambda *xs: np.stack(xs), *items)
+
+
+def _run_trials(simulators, grasps, poses, noise_keys, n_per_key):
+    """Runs every object's trials.
+
+    grasps [O, S, Q, N, 4], poses [O, S, N, 7], noise_keys[o][s]: trial j of (o, s) uses
+    ``sample_noise(noise_keys[o][s], N)[j]`` for every policy (common random numbers).
+    Returns success [O, S, Q, N] bool.
+    """
+    num_o, num_s, num_q, num_n = grasps.shape[:4]
+    out = np.zeros((num_o, num_s, num_q, num_n), bool)
+    for o, simulator in enumerate(simulators):
+        noises = [sim_lib.sample_noise(noise_keys[o][s], n_per_key, simulator.config)
+                  for s in range(num_s)]
+        noise = sim_lib.TrialNoise(*(
+            np.concatenate([np.tile(nz[f], (num_q,) + (1,) * (nz[f].ndim - 1))
+                            for nz in noises]) for f in range(3)))
+        res = simulator.run_trials(
+            grasps[o].reshape(-1, 4), noise,
+            object_pose=np.repeat(poses[o][:, None], num_q, axis=1).reshape(-1, 7))
+        out[o] = res.success.reshape(num_s, num_q, num_n)
+    return out
+
+
+def run(
+    config: OnlineConfig,
+    specs: list[objects_lib.ObjectSpec],
+    out_dir: str | Path,
+    *,
+    theta0: artifacts.Theta0 | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> dict:
+    """Runs (or resumes) the online learning experiment; returns the results dict.
+
+    The state after each finished round is saved to ``out_dir/checkpoint.npz``: rerunning
+    the same command resumes after the last finished round and gives the same table.
+    """
+    out_dir = Path(out_dir)
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"objects must be distinct, got {names}")
+    theta0 = theta0 or artifacts.load_theta0()
+    network = theta0.network
+    core = artifacts.core_set_data(config.core_set, theta0)
+    num_o, num_q, num_s = len(specs), len(config.policies), config.num_seeds
+    num_r, num_e = config.rounds, config.explore
+    fingerprint = run_fingerprint(config, names, theta0)
+
+    root = jax.random.key(config.seed)
+    keys_os = [[object_key(root, n, s) for s in range(num_s)] for n in names]
+    models = [context_lib.scene_model(spec) for spec in specs]
+    simulators = [sim_lib.GraspSimulator(m, backend=config.backend) for m in models]
+    alphas = jnp.asarray([config.policy_alpha(n) for n in config.policies], jnp.float32)
+    epsilon = jnp.float32(config.epsilon)
+    choose = _batched_choose(network, config.policies, crops_lib.CropConfig())
+    greedy = _batched_choose(network, ("greedy",) * num_q, crops_lib.CropConfig())
+    fit, optimizer = _batched_fit(network, config)
+
+    # State: parameter copies [O, S, Q], optimiser states, buffers D [O, S, Q, R*E].
+    tile = lambda x: jnp.broadcast_to(x, (num_o, num_s, num_q) + x.shape)  # noqa: E731
+    params = jax.tree.map(tile, theta0.params)
+    opt_state = jax.tree.map(tile, qn.init_opt_state(optimizer, theta0.params))
+    cap = num_r * num_e
+    crop = crops_lib.CropConfig().crop_size
+    buffer = qn.TrainData(
+        image=np.zeros((num_o, num_s, num_q, cap, crop, crop), np.float32),
+        depth=np.zeros((num_o, num_s, num_q, cap), np.float32),
+        label=np.zeros((num_o, num_s, num_q, cap), np.float32),
+        weight=np.zeros((num_o, num_s, num_q, cap), np.float32),
+    )
+    shape = (num_r + 1, num_o, num_q, num_s)
+    results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan))
+    timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate")}
+    start_round = 0
+
+    ckpt = out_dir / "checkpoint.npz"
+    if ckpt.exists():
+        saved = io.load_npz(ckpt)
+        if str(saved["fingerprint"]) != fingerprint:
+            raise ValueError(f"{out_dir} holds a different learning run; choose another --out "
+                             "or delete it")
+        leaves = [saved[f"p{i}"] for i in range(len(jax.tree.leaves(params)))]
+        params = jax.tree.unflatten(jax.tree.structure(params), leaves)
+        oleaves = [saved[f"o{i}"] for i in range(len(jax.tree.leaves(opt_state)))]
+        opt_state = jax.tree.unflatten(jax.tree.structure(opt_state), oleaves)
+        buffer = qn.TrainData(*(saved[f"buffer_{f}"] for f in qn.TrainData._fields))
+        results = RoundResults(*(saved[f] for f in RoundResults._fields))
+        start_round = int(saved["next_round"])
+        log(f"resuming {out_dir} at round {start_round}")
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    # The fixed low-variance evaluation poses of each (object, seed).
+    lowvar = None
+    if config.eval_poses:
+        lowvar = [[_contexts(_stream(keys_os[o][s], LOWVAR_CONTEXT, 0), specs[o],
+                             config.eval_poses, models[o]) for s in range(num_s)]
+                  for o in range(num_o)]
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=num_r + 1, initial=start_round, unit="round", desc="learn",
+               disable=not progress)
+
+    def evaluate(r, params):
+        t = time.perf_counter()
+        ev = [[_contexts(_stream(keys_os[o][s], EVAL_CONTEXT, r), specs[o], config.evaluate,
+                         models[o]) for s in range(num_s)] for o in range(num_o)]
+        poses = np.stack([[e[0] for e in row] for row in ev])
+        depth = np.stack([[e[1] for e in row] for row in ev])
+        cands = _stack([_stack([e[2] for e in row]) for row in ev])
+        u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (config.evaluate,))))(
+            jnp.stack([jnp.stack([_stream(k, EVAL_UNIFORM, r) for k in row])
+                       for row in keys_os])))
+        action, *_ = greedy(params, depth, cands, u, alphas, epsilon)
+        action = np.asarray(action)  # [O, S, Q, N]
+        grasps = _gather(cands.grasps, action)
+        success = _run_trials(simulators, grasps, poses,
+                              [[_stream(k, EVAL_TRIAL, r) for k in row] for row in keys_os],
+                              config.evaluate)
+        success &= action >= 0
+        results.paper_eval[r] = success.mean(-1).transpose(0, 2, 1)
+        if lowvar is not None:
+            poses = np.stack([[e[0] for e in row] for row in lowvar])
+            depth = np.stack([[e[1] for e in row] for row in lowvar])
+            cands = _stack([_stack([e[2] for e in row]) for row in lowvar])
+            u0 = np.zeros(poses.shape[:3], np.float32)
+            action, *_ = greedy(params, depth, cands, u0, alphas, epsilon)
+            action = np.asarray(action)  # [O, S, Q, P]
+            grasps = _gather(cands.grasps, action)  # [O, S, Q, P, 4]
+            m = config.eval_trials
+            rep_grasps = np.repeat(grasps, m, axis=3)
+            rep_poses = np.repeat(poses, m, axis=2)
+            success = _run_trials(
+                simulators, rep_grasps, rep_poses,
+                [[_stream(k, LOWVAR_TRIAL, r) for k in row] for row in keys_os],
+                config.eval_poses * m)
+            success = success.reshape(num_o, num_s, num_q, config.eval_poses, m)
+            success &= (action >= 0)[..., None]
+            results.lowvar_eval[r] = success.mean((-1, -2)).transpose(0, 2, 1)
+        timings["evaluate"] += time.perf_counter() - t
+
+    if start_round == 0:
+        evaluate(0, params)
+        _save(ckpt, fingerprint, params, opt_state, buffer, results, 1)
+        start_round = 1
+        bar.update(1)
+
+    for r in range(start_round, num_r + 1):
+        # 1. exploration
+        t = time.perf_counter()
+        ex = [[_contexts(_stream(keys_os[o][s], EXPLORE_CONTEXT, r), specs[o], num_e,
+                         models[o]) for s in range(num_s)] for o in range(num_o)]
+        poses = np.stack([[e[0] for e in row] for row in ex])  # [O, S, E, 7]
+        depth = np.stack([[e[1] for e in row] for row in ex])
+        cands = _stack([_stack([e[2] for e in row]) for row in ex])
+        timings["contexts"] += time.perf_counter() - t
+        t = time.perf_counter()
+        u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (num_e,))))(
+            jnp.stack([jnp.stack([_stream(k, POLICY_UNIFORM, r) for k in row])
+                       for row in keys_os])))
+        action, _, _, crops = choose(params, depth, cands, u, alphas, epsilon)
+        action = np.asarray(action)  # [O, S, Q, E]
+        timings["choose"] += time.perf_counter() - t
+        t = time.perf_counter()
+        grasps = _gather(cands.grasps, action)
+        success = _run_trials(simulators, grasps, poses,
+                              [[_stream(k, EXPLORE_TRIAL, r) for k in row] for row in keys_os],
+                              num_e)
+        success &= action >= 0
+        timings["trials"] += time.perf_counter() - t
+        results.explore_success[r] = success.mean(-1).transpose(0, 2, 1)
+        # store (crop, reward) of each chosen grasp
+        t = time.perf_counter()
+        idx = np.maximum(action, 0)
+        image = np.asarray(crops.image)  # [O, S, E, K, c, c]
+        cdepth = np.asarray(crops.depth)  # [O, S, E, K]
+        o_i, s_i, q_i, e_i = np.indices(action.shape)
+        sl = slice((r - 1) * num_e, r * num_e)
+        buffer.image[:, :, :, sl] = image[o_i, s_i, e_i, idx]
+        buffer.depth[:, :, :, sl] = cdepth[o_i, s_i, e_i, idx]
+        buffer.label[:, :, :, sl] = success
+        buffer.weight[:, :, :, sl] = action >= 0
+        # 2. update on D ∪ C
+        fit_keys = jnp.stack([jnp.stack([_stream(k, FIT, r) for k in row]) for row in keys_os])
+        params, opt_state, _ = fit(fit_keys, params, opt_state, buffer, core)
+        jax.block_until_ready(params)
+        timings["update"] += time.perf_counter() - t
+        # 3. evaluation
+        evaluate(r, params)
+        _save(ckpt, fingerprint, params, opt_state, buffer, results, r + 1)
+        bar.update(1)
+    bar.close()
+    rows = table_rows(names, config.policies, results.paper_eval,
+                      results.lowvar_eval if config.eval_poses else None)
+    return {"table": rows, "results": results, "timings": timings, "objects": names,
+            "fingerprint": fingerprint, "config": config}
+
+
+def _gather(grasps, action):
+    """grasps [O, S, N, K, 4], action [O, S, Q, N] -> chosen grasps [O, S, Q, N, 4]
+    (an invalid choice, -1, takes slot 0: its trial runs but its outcome is discarded)."""
+    g = np.asarray(grasps)
+    o, s, q, n = np.indices(action.shape)
+    return g[o, s, n, np.maximum(action, 0)]
+
+
+def _save(path, fingerprint, params, opt_state, buffer, results, next_round):
+    arrays = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(params))}
+    arrays.update({f"o{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(opt_state))})
+    arrays.update({f"buffer_{f}": np.asarray(getattr(buffer, f)) for f in buffer._fields})
+    arrays.update({f: np.asarray(getattr(results, f)) for f in results._fields})
+    io.save_npz(path, fingerprint=np.asarray(fingerprint), next_round=np.asarray(next_round),
+                **arrays)

@@ -48,8 +48,10 @@ from sern_jax import io
 from sern_jax import policies as pol
 from sern_jax import schedules
 from sern_jax.grasp import artifacts
+from sern_jax.grasp import candidates as cand_lib
 from sern_jax.grasp import context as context_lib
 from sern_jax.grasp import crops as crops_lib
+from sern_jax.grasp import depth as depth_lib
 from sern_jax.grasp import objects as objects_lib
 from sern_jax.grasp import quality_net as qn
 from sern_jax.grasp import sim as sim_lib
@@ -63,6 +65,8 @@ __all__ = [
     "run",
     "run_fingerprint",
     "table_rows",
+    "AskTell",
+    "AskTellState",
 ]
 
 POLICIES = ("sern", "sern_log", "egreedy", "greedy")
@@ -234,8 +238,8 @@ def _batched_choose(network, policies, crop_config):
     return jax.jit(jax.vmap(per_seed, (0, 0, 0, 0, None, None)))
 
 
-@functools.lru_cache(maxsize=None)
-def _batched_fit(network, config: OnlineConfig):
+def _fit_one(network, config: OnlineConfig):
+    """One copy's update: ``fit(key, params, opt_state, buffer, core)`` on D ∪ C."""
     optimizer = optax.adam(config.learning_rate)
     fit = qn.make_fit(network, optimizer, loss=config.loss, batch_size=config.batch_size,
                       num_steps=config.fit_steps)
@@ -244,6 +248,12 @@ def _batched_fit(network, config: OnlineConfig):
         data = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), buffer, core)
         return fit(key, params, opt_state, data)
 
+    return one, optimizer
+
+
+@functools.lru_cache(maxsize=None)
+def _batched_fit(network, config: OnlineConfig):
+    one, optimizer = _fit_one(network, config)
     # keys [O, S]; params/opt_state [O, S, Q]; buffer [O, S, Q, cap]; core shared.
     over_q = jax.vmap(one, (None, 0, 0, 0, None))
     over_s = jax.vmap(over_q, (0, 0, 0, 0, None))
@@ -259,6 +269,7 @@ class RoundResults(NamedTuple):
     paper_eval: np.ndarray  # fraction of `evaluate` greedy grasps that succeeded
     lowvar_eval: np.ndarray  # mean greedy success probability over the fixed eval poses
     explore_success: np.ndarray  # fraction of exploration grasps that succeeded (round 0: NaN)
+    explore_action: np.ndarray  # [R + 1, O, Q, S, E] chosen candidate slots (-1: none valid)
 
 
 def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.ndarray,
@@ -378,7 +389,8 @@ def run(
         weight=np.zeros((num_o, num_s, num_q, cap), np.float32),
     )
     shape = (num_r + 1, num_o, num_q, num_s)
-    results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan))
+    results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan),
+                           np.full(shape + (num_e,), -1, np.int32))
     timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate")}
     start_round = 0
 
@@ -478,6 +490,7 @@ def run(
         success &= action >= 0
         timings["trials"] += time.perf_counter() - t
         results.explore_success[r] = success.mean(-1).transpose(0, 2, 1)
+        results.explore_action[r] = action.transpose(0, 2, 1, 3)
         # store (crop, reward) of each chosen grasp
         t = time.perf_counter()
         idx = np.maximum(action, 0)
@@ -520,3 +533,167 @@ def _save(path, fingerprint, params, opt_state, buffer, results, next_round):
     arrays.update({f: np.asarray(getattr(results, f)) for f in results._fields})
     io.save_npz(path, fingerprint=np.asarray(fingerprint), next_round=np.asarray(next_round),
                 **arrays)
+
+
+# ----------------------------------------------------------------------------- ask / tell
+
+
+class AskTellState(NamedTuple):
+    """Everything a robot loop must keep between grasps (save it with :meth:`AskTell.save`)."""
+
+    params: qn.QualityParams  # the current network θ
+    opt_state: object  # Adam state over params.net
+    buffer: qn.TrainData  # D: [rounds * explore] rows (weight 0 = empty)
+    round_index: int  # 1-based round of the next grasp
+    grasp_index: int  # grasps told in this round
+    pending: tuple | None  # (slot, crop image [S, S], crop depth []) of the last ask
+
+
+class AskTell:
+    """Algorithm 1 for a real robot loop: ``ask`` for a grasp, execute it, ``tell`` the reward.
+
+    One learner = one (object, seed, policy) copy of :func:`run`, with the same keys: given
+    the same depth images it asks for the same grasps and, told the same rewards, makes the
+    same updates as the batched run (tests/grasp/test_online.py drives both with the
+    simulator). After every ``config.explore`` tells it updates θ on D ∪ C.
+
+    Args:
+      config: the experiment settings (policies, rounds, explore, α, ε, fit settings).
+      policy: one of ``POLICIES``.
+      object_name: the name whose CRC32 keys the streams (as in :func:`run`).
+      seed_index: which seed of :func:`run` this learner is.
+      theta0: the pretrained network (default: the shipped one).
+    """
+
+    def __init__(self, config: OnlineConfig, policy: str = "sern", object_name: str = "object",
+                 seed_index: int = 0, theta0: artifacts.Theta0 | None = None):
+        if policy not in POLICIES:
+            raise ValueError(f"unknown policy {policy!r}; choose from {', '.join(POLICIES)}")
+        if seed_index < 0:
+            raise ValueError(f"seed_index must be >= 0, got {seed_index}")
+        self.config, self.policy = config, policy
+        self.theta0 = theta0 or artifacts.load_theta0()
+        self.network = self.theta0.network
+        self.key_os = object_key(jax.random.key(config.seed), object_name, seed_index)
+        self.core = artifacts.core_set_data(config.core_set, self.theta0)
+        self.context_config = context_lib.ContextConfig()
+        self.camera = None
+        self._choose = jax.jit(make_choose(self.network, (policy,), crops_lib.CropConfig()))
+        self._greedy = jax.jit(make_choose(self.network, ("greedy",), crops_lib.CropConfig()))
+        one, self.optimizer = _fit_one(self.network, config)
+        self._fit = jax.jit(one)
+        self._sample = jax.jit(lambda k, d, p: cand_lib.sample(
+            self.context_config.candidates, k, d, p))
+        self.alpha = jnp.asarray([config.policy_alpha(policy)], jnp.float32)
+
+    def init(self) -> AskTellState:
+        """θ0, an empty D, round 1."""
+        cap = self.config.rounds * self.config.explore
+        s = self.network.config.crop_size
+        buffer = qn.TrainData(np.zeros((cap, s, s), np.float32), np.zeros(cap, np.float32),
+                              np.zeros(cap, np.float32), np.zeros(cap, np.float32))
+        return AskTellState(self.theta0.params,
+                            qn.init_opt_state(self.optimizer, self.theta0.params),
+                            buffer, 1, 0, None)
+
+    def candidates(self, state: AskTellState, depth_image, camera=None):
+        """The 64 candidates the learner samples on ``depth_image`` for its next grasp (the
+        same key as :func:`run`'s context of that grasp)."""
+        camera = camera if camera is not None else depth_lib.overhead_params(
+            self.context_config.camera)
+        key_ctx = jax.random.fold_in(
+            _stream(self.key_os, EXPLORE_CONTEXT, state.round_index), state.grasp_index)
+        key = jax.random.fold_in(key_ctx, context_lib.CANDIDATE_STREAM)
+        return jax.tree.map(np.asarray, self._sample(key, jnp.asarray(depth_image), camera))
+
+    def ask(self, state: AskTellState, depth_image, candidates=None, camera=None):
+        """The grasp to try on ``depth_image`` [H, W] (planar depth, metres).
+
+        Returns:
+          (grasp [4] (x, y, z, θ) world frame, state); grasp is None when no candidate is
+          valid (nothing to try: take another image).
+        """
+        if state.round_index > self.config.rounds:
+            raise ValueError(f"all {self.config.rounds} rounds are done")
+        if state.pending is not None:
+            raise ValueError("tell() the reward of the last grasp before asking again")
+        depth_image = np.asarray(depth_image, np.float32)
+        if depth_image.ndim != 2 or not np.all(np.isfinite(depth_image)):
+            raise ValueError(f"depth_image must be a finite [H, W] array, got shape "
+                             f"{depth_image.shape}")
+        cands = candidates if candidates is not None else self.candidates(
+            state, depth_image, camera)
+        u = jax.random.uniform(_stream(self.key_os, POLICY_UNIFORM, state.round_index),
+                               (self.config.explore,))[state.grasp_index]
+        params = jax.tree.map(lambda x: x[None], state.params)
+        batch = jax.tree.map(lambda x: jnp.asarray(x)[None], cands)
+        action, _, _, crops = self._choose(params, jnp.asarray(depth_image)[None], batch,
+                                           u[None], self.alpha, jnp.float32(self.config.epsilon))
+        slot = int(action[0, 0])
+        if slot < 0:
+            return None, state
+        pending = (slot, np.asarray(crops.image[0, slot]), float(crops.depth[0, slot]))
+        return np.asarray(cands.grasps[slot]), state._replace(pending=pending)
+
+    def tell(self, state: AskTellState, grasp, reward) -> AskTellState:
+        """Stores (crop, reward) of the asked grasp; updates θ after each round's last one."""
+        if state.pending is None:
+            raise ValueError("tell() without a pending ask()")
+        if reward not in (0, 1, 0.0, 1.0, True, False):
+            raise ValueError(f"reward must be 0 or 1, got {reward!r}")
+        slot, image, depth = state.pending
+        row = (state.round_index - 1) * self.config.explore + state.grasp_index
+        buf = qn.TrainData(*(np.array(a) for a in state.buffer))
+        buf.image[row], buf.depth[row] = image, depth
+        buf.label[row], buf.weight[row] = float(reward), 1.0
+        state = state._replace(buffer=buf, pending=None, grasp_index=state.grasp_index + 1)
+        if state.grasp_index == self.config.explore:
+            key = _stream(self.key_os, FIT, state.round_index)
+            params, opt_state, _ = self._fit(key, state.params, state.opt_state, buf, self.core)
+            state = state._replace(params=params, opt_state=opt_state, grasp_index=0,
+                                   round_index=state.round_index + 1)
+        return state
+
+    def best(self, state: AskTellState, depth_image, candidates=None, camera=None):
+        """The greedy grasp (evaluation: no exploration, nothing stored)."""
+        cands = candidates if candidates is not None else self.candidates(
+            state, depth_image, camera)
+        params = jax.tree.map(lambda x: x[None], state.params)
+        batch = jax.tree.map(lambda x: jnp.asarray(x)[None], cands)
+        action, *_ = self._greedy(params, jnp.asarray(depth_image, jnp.float32)[None], batch,
+                                  jnp.zeros(1), self.alpha, jnp.float32(0))
+        slot = int(action[0, 0])
+        return None if slot < 0 else np.asarray(cands.grasps[slot])
+
+    @staticmethod
+    def save(state: AskTellState, path: str | Path) -> None:
+        """Writes the state to ``path`` (.npz, atomically)."""
+        arrays = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(state.params))}
+        arrays.update({f"o{i}": np.asarray(x)
+                       for i, x in enumerate(jax.tree.leaves(state.opt_state))})
+        arrays.update({f"buffer_{f}": np.asarray(getattr(state.buffer, f))
+                       for f in qn.TrainData._fields})
+        if state.pending is not None:
+            arrays.update(pending_slot=np.asarray(state.pending[0]),
+                          pending_image=state.pending[1], pending_depth=np.asarray(state.pending[2]))
+        io.save_npz(path, round_index=np.asarray(state.round_index),
+                    grasp_index=np.asarray(state.grasp_index), **arrays)
+
+    def load(self, path: str | Path) -> AskTellState:
+        """Reads a state written by :meth:`save` (for this learner's network)."""
+        saved = io.load_npz(path)
+        template = self.init()
+        params = jax.tree.unflatten(
+            jax.tree.structure(template.params),
+            [jnp.asarray(saved[f"p{i}"]) for i in range(len(jax.tree.leaves(template.params)))])
+        opt_state = jax.tree.unflatten(
+            jax.tree.structure(template.opt_state),
+            [jnp.asarray(saved[f"o{i}"])
+             for i in range(len(jax.tree.leaves(template.opt_state)))])
+        buffer = qn.TrainData(*(saved[f"buffer_{f}"] for f in qn.TrainData._fields))
+        pending = None
+        if "pending_slot" in saved:
+            pending = (int(saved["pending_slot"]), saved["pending_image"],
+                       float(saved["pending_depth"]))
+        return AskTellState(params, opt_state, buffer, int(saved["round_index"]),
+                            int(saved["grasp_index"]), pending)

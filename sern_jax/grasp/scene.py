@@ -101,7 +101,7 @@ class SceneConfig:
     ls_iterations: int = 8
     impratio: float = 10.0
     opening: float = 0.085
-    finger_force: float = 15.0
+    finger_force: float = 6.0
     finger_kp: float = 1000.0
     finger_damping: float = 20.0
     palm_kp: float = 4000.0

@@ -12,6 +12,8 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
+import shutil
 import time
 from pathlib import Path
 
@@ -78,12 +80,145 @@ def _problem(exp: RegretExperiment, dtype):
     return problems.bernoulli(values, dtype=dtype), False
 
 
+_MAX_SEED = 2**32 - 1  # jax.random.key uses the seed modulo 2^32: larger ones would collide
+_MAX_DAYS = 7.0  # refuse runs estimated to take longer than this on this machine
+# Measured seed-rounds/s on the shared 2-core CPU (K = 10): the fast softmax runner and the
+# general runner (whose per-round cost grows with K); used only for the up-front estimate.
+_FAST_RATE = 3.0e6
+_GENERAL_RATE = 1.0e6
+
+
+def _check_cli_values(exp: RegretExperiment) -> None:
+    """Checks of the raw option values (before any float32 cast hides them), naming the flag."""
+    def integer(flag, value, low, high=None):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low \
+                or (high is not None and value > high):
+            rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise ValueError(f"{flag} must be an integer {rng}, got {value!r}")
+
+    if not exp.policies:
+        raise ValueError("--policies is empty; give a comma list such as 'softmax,greedy'")
+    if len(set(exp.policies)) != len(exp.policies):
+        raise ValueError(f"--policies lists a policy twice: {','.join(exp.policies)}")
+    integer("--arms", exp.num_arms, 2, 2**20)
+    integer("--contexts", exp.num_contexts, 1, 2**20)
+    integer("--seeds", exp.num_seeds, 1)
+    integer("--horizon", exp.horizon, 1)
+    integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
+    integer("--chunk-size", exp.chunk_size, 1)
+    integer("--devices", exp.devices, 1)
+    integer("--seed", exp.seed, 0, _MAX_SEED)
+    for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p), ("--epsilon", exp.epsilon),
+                        ("--gap", exp.gap)):
+        if not math.isfinite(value):
+            raise ValueError(f"{flag} must be a finite number, got {value!r}")
+    if exp.alpha0 <= 0:
+        raise ValueError(f"--alpha must be > 0, got {exp.alpha0!r}")
+    if not 0.0 <= exp.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must lie in [0, 1], got {exp.epsilon!r}")
+    if exp.num_contexts > 1:
+        if not 0.0 < exp.gap < 1.0:
+            raise ValueError(f"--gap must lie in (0, 1), got {exp.gap!r}")
+        if exp.means != RegretExperiment.means:
+            raise ValueError(f"--means applies to one context; with --contexts "
+                             f"{exp.num_contexts} the problem is random with gap --gap "
+                             f"(got --means {exp.means!r})")
+    if exp.schedule in ("log", "theorem4") and exp.p <= 0:
+        raise ValueError(f"--p must be > 0 for --schedule {exp.schedule}, got {exp.p!r}")
+    dtype = "float64" if exp.float64 else "float32"
+    if "softmax" in exp.policies and exp.schedule in ("constant", "log", "theorem4") \
+            and (exp.schedule == "constant" or exp.horizon >= 2):
+        from sern_jax import schedules
+
+        with np.errstate(all="ignore"):
+            alpha = float(schedules.alpha_of_horizon(exp.schedule, exp.horizon, exp.alpha0,
+                                                     exp.p))
+        tiny = float(np.finfo(dtype).tiny)
+        if not alpha >= tiny:
+            hint = "use --float64 (down to 2.2e-308) or " if not exp.float64 else "use "
+            raise ValueError(
+                f"--alpha {exp.alpha0!r} gives the softmax temperature α(T) = {alpha:.3g}, "
+                f"below the smallest normal {dtype} ({tiny:.3g}); {hint}the greedy policy "
+                f"(the α → 0 limit)")
+
+
+def _estimate(exp: RegretExperiment, triples) -> dict:
+    """Up-front estimate of the run's memory, disk and time (host-side, no compile)."""
+    from sern_jax import executor, fast_softmax
+
+    out_bytes = 0
+    seed_rounds_s = 0.0
+    for _, cfg, params in triples:
+        out_bytes += exp.num_seeds * executor.bytes_per_seed(cfg)
+        fast = fast_softmax.supports(cfg, params)
+        rate = _FAST_RATE if fast else _GENERAL_RATE * min(1.0, 10.0 / exp.num_arms)
+        seed_rounds_s += exp.num_seeds * exp.horizon / rate
+    # merging holds every chunk and the concatenated arrays at once: twice the outputs
+    return {"memory_bytes": 2 * out_bytes, "disk_bytes": 2 * out_bytes,
+            "seconds": seed_rounds_s}
+
+
+def _available_memory() -> int:
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"
+
+
+def _fmt_time(s: float) -> str:
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    if s < 172800:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.3g} days"
+
+
+def check_fits(exp: RegretExperiment, triples, out_dir: Path) -> dict:
+    """Refuses (``ValueError``, naming the estimate and the limit) runs that cannot fit."""
+    est = _estimate(exp, triples)
+    avail = _available_memory()
+    if est["memory_bytes"] > avail:
+        raise ValueError(
+            f"--seeds {exp.num_seeds} x {len(triples)} policies needs about "
+            f"{_fmt_bytes(est['memory_bytes'])} of memory to merge the results, more than the "
+            f"{_fmt_bytes(avail)} available; use fewer --seeds or --checkpoints")
+    probe = out_dir
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    free = shutil.disk_usage(probe).free
+    if est["disk_bytes"] > free:
+        raise ValueError(
+            f"the run needs up to {_fmt_bytes(est['disk_bytes'])} of disk under {out_dir}, "
+            f"more than the {_fmt_bytes(free)} free; use fewer --seeds or --checkpoints")
+    if est["seconds"] > _MAX_DAYS * 86400:
+        raise ValueError(
+            f"--seeds {exp.num_seeds} x --horizon {exp.horizon} x {len(triples)} policies is "
+            f"estimated at {_fmt_time(est['seconds'])} on this machine, over the "
+            f"{_MAX_DAYS:g}-day limit; use fewer --seeds or a shorter --horizon")
+    return est
+
+
 def _configs(exp: RegretExperiment):
     """Validated (policy, RunConfig, RunParams) triples; raises before any compile."""
     import jax.numpy as jnp
 
     from sern_jax import simulate as sim
 
+    _check_cli_values(exp)
     dtype = jnp.float64 if exp.float64 else jnp.float32
     for policy in exp.policies:  # names, sizes and dtype first: clearer errors
         sim.validate(sim.RunConfig(policy=policy, estimator=exp.estimator,
@@ -92,10 +227,6 @@ def _configs(exp: RegretExperiment):
                                    num_checkpoints=exp.num_checkpoints,
                                    dtype="float64" if exp.float64 else "float32"))
     problem, random_means = _problem(exp, dtype)
-    if exp.num_seeds < 1:
-        raise ValueError(f"--seeds must be >= 1, got {exp.num_seeds}")
-    if exp.chunk_size < 1:
-        raise ValueError(f"--chunk-size must be >= 1, got {exp.chunk_size}")
     out = []
     for policy in exp.policies:
         cfg = sim.RunConfig(policy=policy, estimator=exp.estimator, schedule=exp.schedule,
@@ -110,73 +241,163 @@ def _configs(exp: RegretExperiment):
     return out
 
 
+def _chunk_name(policy: str, start: int, stop: int) -> str:
+    """Chunk files are named by the seed range [start, stop) they hold, so a rerun with another
+    --chunk-size or --devices can only reuse saved seeds, never mix two layouts."""
+    return f"{policy}__seeds_{start:012d}-{stop:012d}.npz"
+
+
+def _saved_ranges(chunk_dir: Path, policy: str) -> list[tuple[int, int, Path]]:
+    out = []
+    prefix = f"{policy}__seeds_"
+    if not chunk_dir.is_dir():
+        return out
+    for path in chunk_dir.glob(f"{prefix}*.npz"):
+        try:
+            a, b = path.name[len(prefix):-len(".npz")].split("-")
+            out.append((int(a), int(b), path))
+        except ValueError:
+            continue
+    return sorted(out)
+
+
+def _cover(saved, start: int, stop: int) -> list[tuple[int, int, Path]] | None:
+    """Saved files (with the slice of each) that together hold seeds [start, stop), or None."""
+    pieces, pos = [], start
+    while pos < stop:
+        best = max((s for s in saved if s[0] <= pos < s[1]), key=lambda s: s[1], default=None)
+        if best is None:
+            return None
+        pieces.append((pos - best[0], min(best[1], stop) - best[0], best[2]))
+        pos = min(best[1], stop)
+    return pieces
+
+
+def _load_range(saved, start: int, stop: int) -> dict[str, np.ndarray]:
+    """Seeds [start, stop) of each field from the saved files, plus ``wall_s``: the seconds
+    spent computing them (each file's time in proportion to the seeds taken from it)."""
+    parts, wall = [], 0.0
+    for lo, hi, path in _cover(saved, start, stop):
+        data = io.load_npz(path)
+        a, b = (int(v) for v in path.name.rsplit("_", 1)[1][:-4].split("-"))
+        for f in FIELDS:
+            if data[f].shape[0] != b - a:
+                raise ValueError(f"{path} holds {data[f].shape[0]} rows of {f}, not the "
+                                 f"{b - a} seeds its name says; delete it and rerun")
+        parts.append({f: data[f][lo:hi] for f in FIELDS})
+        if "wall_s" in data:
+            wall += float(data["wall_s"]) * (hi - lo) / (b - a)
+    out = {f: np.concatenate([p[f] for p in parts], axis=0) for f in FIELDS}
+    out["wall_s"] = wall
+    return out
+
+
 def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool = True,
                    log=print) -> Path:
-    """Runs (or resumes) the experiment into ``out_dir``; returns the run directory."""
+    """Runs (or resumes) the experiment into ``out_dir``; returns the run directory.
+
+    Everything is validated (options, sizes against this machine's memory and disk, an
+    existing directory's experiment, the device count) before anything is written; a run that
+    fails before saving any seeds leaves no directory behind.
+    """
     import jax
 
     from sern_jax import executor
     from sern_jax import simulate as sim
 
+    run_dir = Path(out_dir)
     ctx = jax.enable_x64() if exp.float64 else _nullcontext()
     with ctx:
         triples = _configs(exp)  # validation before any compile
-        run_dir = Path(out_dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "figures").mkdir(exist_ok=True)
-        chunk_dir = run_dir / "chunks"
-        chunk_dir.mkdir(exist_ok=True)
+        if run_dir.exists() and not run_dir.is_dir():
+            raise ValueError(f"--out {run_dir} exists and is not a directory")
         cfg_path = run_dir / "config.json"
         if cfg_path.exists():
-            old = io.load_json(cfg_path)
+            try:
+                old = io.load_json(cfg_path)
+            except (OSError, ValueError):
+                raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete "
+                                 f"it") from None
             if old.get("fingerprint") != exp.fingerprint():
                 raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
                                  f"{old.get('fingerprint')} != {exp.fingerprint()}); "
                                  f"choose another --out or delete it")
-        io.save_json(cfg_path, {"experiment": exp, "fingerprint": exp.fingerprint(),
-                                "checkpoints": sim.checkpoint_times(triples[0][1])})
         mesh = None
         if exp.devices > 1:
             from sern_jax.sharding import seed_mesh
 
-            mesh = seed_mesh(exp.devices)
-        chunk = min(exp.chunk_size, exp.num_seeds)
-        num_chunks = math.ceil(exp.num_seeds / chunk)
-        # one fixed call shape for every saved chunk (the last, smaller one too), split so that
-        # each core runs its own calls
-        per_call = math.ceil(chunk / executor.concurrent_calls(mesh))
-        bar = _progress_bar(len(triples) * exp.num_seeds, progress)
-        timings = {}
-        for policy, cfg, params in triples:
+            try:
+                mesh = seed_mesh(exp.devices)
+            except ValueError:
+                raise ValueError(f"--devices {exp.devices}: only {len(jax.devices())} "
+                                 f"device(s) visible") from None
+        est = check_fits(exp, triples, run_dir)
+        if est["seconds"] > 60 and progress:
+            log(f"estimated run time ~{_fmt_time(est['seconds'])} "
+                f"({_fmt_bytes(est['memory_bytes'])} of results)")
+        created = not run_dir.exists()
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            probe = run_dir / f".write-test-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError as exc:
+            raise ValueError(f"--out {run_dir}: cannot write there ({exc.strerror or exc})") \
+                from None
+        try:
+            return _run(exp, triples, run_dir, mesh, progress)
+        except Exception:
+            chunk_dir = run_dir / "chunks"
+            if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
+                shutil.rmtree(run_dir, ignore_errors=True)
+            raise
+
+
+def _run(exp, triples, run_dir: Path, mesh, progress: bool) -> Path:
+    from sern_jax import executor
+    from sern_jax import simulate as sim
+
+    (run_dir / "figures").mkdir(exist_ok=True)
+    chunk_dir = run_dir / "chunks"
+    chunk_dir.mkdir(exist_ok=True)
+    io.save_json(run_dir / "config.json",
+                 {"experiment": exp, "fingerprint": exp.fingerprint(),
+                  "checkpoints": sim.checkpoint_times(triples[0][1])})
+    chunk = min(exp.chunk_size, exp.num_seeds)
+    ranges = [(a, min(a + chunk, exp.num_seeds)) for a in range(0, exp.num_seeds, chunk)]
+    # one fixed call shape for every saved chunk (the last, smaller one too), split so that
+    # each core runs its own calls
+    per_call = math.ceil(chunk / executor.concurrent_calls(mesh))
+    bar = _progress_bar(len(triples) * exp.num_seeds, progress)
+    for policy, cfg, params in triples:
+        for a, b in ranges:
+            if _cover(_saved_ranges(chunk_dir, policy), a, b) is not None:
+                bar.update(b - a)
+                continue
             start_time = time.perf_counter()
-            ran = False
-            for c in range(num_chunks):
-                path = chunk_dir / f"{policy}_{c:05d}.npz"
-                size = min(chunk, exp.num_seeds - c * chunk)
-                if path.exists():
-                    bar.update(size)
-                    continue
-                out = executor.run_seeds(cfg, params, exp.seed, size, first_seed=c * chunk,
-                                         chunk_size=per_call, mesh=mesh)
-                io.save_npz(path, **{f: getattr(out, f) for f in FIELDS})
-                ran = True
-                bar.update(size)
-            if ran:
-                timings[policy] = time.perf_counter() - start_time
-        bar.close()
-        merged = {}
-        for policy, _, _ in triples:
-            parts = [io.load_npz(chunk_dir / f"{policy}_{c:05d}.npz") for c in range(num_chunks)]
-            for f in FIELDS:
-                merged[f"{policy}__{f}"] = np.concatenate([p[f] for p in parts], axis=0)
-        merged["t"] = sim.checkpoint_times(triples[0][1])
-        merged["means"] = np.asarray(triples[0][2].problem.means)
-        io.save_npz(run_dir / "results.npz", **merged)
-        meta = io.run_metadata(wall_seconds_per_policy=timings)
-        io.save_json(run_dir / "metadata.json", meta)
-        summary = summarise(exp, merged)
-        io.save_json(run_dir / "summary.json", summary)
-        _write_report(run_dir, exp, summary, meta)
+            out = executor.run_seeds(cfg, params, exp.seed, b - a, first_seed=a,
+                                     chunk_size=per_call, mesh=mesh)
+            io.save_npz(chunk_dir / _chunk_name(policy, a, b),
+                        wall_s=np.float64(time.perf_counter() - start_time),
+                        **{f: getattr(out, f) for f in FIELDS})
+            bar.update(b - a)
+    bar.close()
+    merged, timings = {}, {}
+    for policy, _, _ in triples:
+        saved = _saved_ranges(chunk_dir, policy)
+        parts = [_load_range(saved, a, b) for a, b in ranges]
+        # compute time of every seed, whichever invocation (first run or resume) computed it
+        timings[policy] = sum(p["wall_s"] for p in parts)
+        for f in FIELDS:
+            merged[f"{policy}__{f}"] = np.concatenate([p[f] for p in parts], axis=0)
+    merged["t"] = sim.checkpoint_times(triples[0][1])
+    merged["means"] = np.asarray(triples[0][2].problem.means)
+    io.save_npz(run_dir / "results.npz", **merged)
+    meta = io.run_metadata(wall_seconds_per_policy=timings)
+    io.save_json(run_dir / "metadata.json", meta)
+    summary = summarise(exp, merged)
+    io.save_json(run_dir / "summary.json", summary)
+    _write_report(run_dir, exp, summary, meta)
     return run_dir
 
 

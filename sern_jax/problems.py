@@ -106,6 +106,8 @@ def contextual_with_gap(
     Returns:
       A :class:`Problem` with uniform context probabilities.
     """
+    if not 0.0 < float(gap) < 1.0:  # also refuses NaN
+        raise ValueError(f"gap must lie in (0, 1), got {float(gap)!r}")
     key_best, key_rest, key_perm = jax.random.split(key, 3)
     best = jax.random.uniform(key_best, (num_contexts, 1), dtype, minval=gap, maxval=1.0)
     rest = jax.random.uniform(key_rest, (num_contexts, num_arms - 2), dtype) * (best - gap)

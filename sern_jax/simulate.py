@@ -61,6 +61,10 @@ EST_NOISE_STREAM = 1  # agent: oracle estimator noise (folded into the agent str
 POLICY_NOISE_STREAM = 2  # agent: index-policy noise (folded into the agent stream)
 
 
+_MAX_HORIZON = 2**31 - 1  # rounds are int32 inside the scan
+_MAX_HORIZON_F32 = 2**24  # float32 integers (reward sums, pull counts) are exact up to 2^24
+
+
 @dataclasses.dataclass(frozen=True)
 class RunConfig:
     """Static configuration: anything that changes the compiled program.
@@ -206,36 +210,62 @@ def validate(config: RunConfig, params: RunParams | None = None, num_seeds: int 
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
     if config.dtype not in ("float32", "float64"):
         raise ValueError(f"dtype must be 'float32' or 'float64', got {config.dtype!r}")
+    if config.horizon > _MAX_HORIZON:
+        raise ValueError(f"horizon (T) must be <= {_MAX_HORIZON} (int32 round counters), "
+                         f"got {config.horizon}")
+    if config.dtype == "float32" and config.horizon > _MAX_HORIZON_F32:
+        raise ValueError(
+            f"horizon (T) = {config.horizon} exceeds 2^24 = {_MAX_HORIZON_F32}, past which "
+            f"float32 reward sums and counts are no longer exact; use float64 (--float64)")
     if config.dtype == "float64" and not jax.config.jax_enable_x64:
         raise ValueError("dtype='float64' needs x64: run inside `with jax.enable_x64():`")
     if params is None:
         return
     prob_lib.validate_problem(params.problem, config.num_arms, config.num_contexts)
     _check_scalar("alpha0", params.alpha0, batched_ok=True)
-    schedules.validate_schedule(config.schedule, config.horizon, params.alpha0, params.p)
+    schedules.validate_schedule(config.schedule, config.horizon, _show(params.alpha0),
+                                _show(params.p))
+    if config.policy == "softmax":
+        # exp((r̂ − max r̂)/α) needs a normal α: a subnormal one flushes to 0 and gives NaN
+        with np.errstate(all="ignore"):
+            alpha = schedules.alpha_of_horizon(config.schedule, config.horizon,
+                                               np.asarray(params.alpha0, np.float64),
+                                               np.asarray(params.p, np.float64))
+        tiny = float(np.finfo(config.dtype).tiny)
+        if np.any(~(alpha >= tiny)):
+            raise ValueError(
+                f"softmax temperature α(T) = {_show(alpha)} is below the smallest normal "
+                f"{config.dtype} ({tiny:.3g}); use float64 or the greedy policy (the α → 0 "
+                f"limit)")
     eps = np.asarray(params.epsilon, np.float64)
     if np.any(~np.isfinite(eps)) or np.any((eps < 0) | (eps > 1)):
-        raise ValueError(f"epsilon must lie in [0, 1], got {params.epsilon!r}")
+        raise ValueError(f"epsilon must lie in [0, 1], got {_show(params.epsilon)}")
     gamma = np.asarray(params.exp3_gamma, np.float64)
     if config.policy == "exp3" and (np.any(~np.isfinite(gamma)) or np.any((gamma <= 0) | (gamma > 1))):
-        raise ValueError(f"exp3_gamma must lie in (0, 1], got {params.exp3_gamma!r}")
+        raise ValueError(f"exp3_gamma must lie in (0, 1], got {_show(params.exp3_gamma)}")
     for name in ("ucb_c", "bgc_c"):
         v = np.asarray(getattr(params, name), np.float64)
         if np.any(~np.isfinite(v)) or np.any(v < 0):
-            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+            raise ValueError(f"{name} must be finite and >= 0, got {_show(v)}")
     o = params.oracle
     beta = np.asarray(o.beta, np.float64)
     if np.any(~np.isfinite(beta)) or np.any(beta < 0):
-        raise ValueError(f"beta must be finite and >= 0, got {o.beta!r}")
+        raise ValueError(f"beta must be finite and >= 0, got {_show(o.beta)}")
     oe = np.asarray(o.oracle_eps, np.float64)
     if np.any(~np.isfinite(oe)) or np.any((oe < 0) | (oe > 1)):
-        raise ValueError(f"oracle_eps must lie in [0, 1], got {o.oracle_eps!r}")
+        raise ValueError(f"oracle_eps must lie in [0, 1], got {_show(o.oracle_eps)}")
     fq = np.asarray(o.flip_q, np.float64)
     if np.any(~np.isfinite(fq)) or np.any((fq < 0) | (fq > 1)):
-        raise ValueError(f"flip_q must lie in [0, 1], got {o.flip_q!r}")
+        raise ValueError(f"flip_q must lie in [0, 1], got {_show(o.flip_q)}")
     pa = np.asarray(o.pinned_arm)
     if np.any((pa < 0) | (pa >= config.num_arms)):
-        raise ValueError(f"pinned_arm must lie in [0, {config.num_arms - 1}], got {o.pinned_arm!r}")
+        raise ValueError(f"pinned_arm must lie in [0, {config.num_arms - 1}], got {_show(o.pinned_arm)}")
+
+
+def _show(value):
+    """A parameter as a plain number (or list) for messages, not ``Array(0., dtype=...)``."""
+    arr = np.asarray(value)
+    return arr.item() if arr.ndim == 0 else arr.tolist()
 
 
 def _check_scalar(name, value, batched_ok=False):

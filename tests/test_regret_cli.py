@@ -35,8 +35,8 @@ def test_resume_after_interruption_loses_nothing(run_dir, tmp_path):
     # Simulate a run killed after some chunks: copy two finished chunks, rerun, compare.
     out = tmp_path / "resumed"
     (out / "chunks").mkdir(parents=True)
-    for name in ("softmax_00000.npz", "softmax_00001.npz"):
-        (out / "chunks" / name).write_bytes((run_dir / "chunks" / name).read_bytes())
+    for path in sorted((run_dir / "chunks").glob("softmax__*.npz"))[:2]:
+        (out / "chunks" / path.name).write_bytes(path.read_bytes())
     (out / "config.json").write_text((run_dir / "config.json").read_text())
     assert cli.main(ARGS + ["--out", str(out), "--no-figures"]) == 0
     a = io.load_npz(run_dir / "results.npz")
@@ -50,8 +50,8 @@ def test_different_experiment_in_same_dir_is_refused(run_dir):
 
 
 @pytest.mark.parametrize("bad,match", [
-    (["--alpha", "0"], "alpha0"), (["--epsilon", "2"], "epsilon"), (["--arms", "1"], "num_arms"),
-    (["--horizon", "0"], "horizon"), (["--seeds", "0"], "seeds"),
+    (["--alpha", "0"], "--alpha"), (["--epsilon", "2"], "--epsilon"), (["--arms", "1"], "--arms"),
+    (["--horizon", "0"], "--horizon"), (["--seeds", "0"], "--seeds"),
     (["--policies", "softmax,bogus"], "bogus"), (["--estimator", "nn"], "nn"),
     (["--means", "0.1,0.2"], "--means"),
 ])
@@ -66,3 +66,104 @@ def test_summary_saves_theorem1_floor_for_the_figure(run_dir):
     assert floor["alpha"] == pytest.approx(0.1)  # constant schedule, default α0
     assert floor["c"] == pytest.approx(np.exp(-1 / 0.1) / 4, rel=1e-12)
     assert floor["pi_min"] == pytest.approx(1 / (1 + 3 * np.exp(1 / 0.1)), rel=1e-12)
+
+
+def _snapshot(root):
+    return {p.relative_to(root): (p.read_bytes(), p.stat().st_mtime_ns)
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _copy(src, dst):
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+@pytest.mark.parametrize("chunk", ["7", "60"])
+def test_rerun_with_another_chunk_size_never_mixes_layouts(run_dir, tmp_path, chunk):
+    # Issue 9 item 1: a rerun with another --chunk-size used to merge both layouts (duplicated
+    # seeds, wrong R_T, summary saying S seeds). Now the saved seeds are reused or recomputed
+    # and the merged results equal the first run's exactly.
+    out = _copy(run_dir, tmp_path / "d")
+    args = [a for a in ARGS] + ["--out", str(out), "--no-figures"]
+    args[args.index("--chunk-size") + 1] = chunk
+    assert cli.main(args) == 0
+    a = io.load_npz(run_dir / "results.npz")
+    b = io.load_npz(out / "results.npz")
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    assert b["softmax__regret"].shape[0] == 60
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["num_seeds"] == 60
+
+
+def test_partly_saved_other_layout_is_completed_not_merged(run_dir, tmp_path):
+    # a run killed after one chunk of size 25, resumed with --chunk-size 40
+    out = tmp_path / "d"
+    (out / "chunks").mkdir(parents=True)
+    (out / "config.json").write_text((run_dir / "config.json").read_text())
+    for path in sorted((run_dir / "chunks").glob("*__seeds_000000000000-*.npz")):
+        (out / "chunks" / path.name).write_bytes(path.read_bytes())
+    args = list(ARGS) + ["--out", str(out), "--no-figures"]
+    args[args.index("--chunk-size") + 1] = "40"
+    assert cli.main(args) == 0
+    a = io.load_npz(run_dir / "results.npz")
+    b = io.load_npz(out / "results.npz")
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_metadata_after_resume_times_every_policy(run_dir, tmp_path):
+    out = tmp_path / "resumed"
+    (out / "chunks").mkdir(parents=True)
+    for path in sorted((run_dir / "chunks").glob("softmax__*.npz")):
+        (out / "chunks" / path.name).write_bytes(path.read_bytes())
+    (out / "config.json").write_text((run_dir / "config.json").read_text())
+    assert cli.main(ARGS + ["--out", str(out), "--no-figures"]) == 0
+    timings = io.load_json(out / "metadata.json")["wall_seconds_per_policy"]
+    assert set(timings) == {"softmax", "greedy"} and all(v > 0 for v in timings.values())
+
+
+@pytest.mark.parametrize("bad", [["--devices", "4"], ["--devices", "0"], ["--alpha", "0.5"],
+                                 ["--seed", "99999999999999999999"]])
+def test_failed_command_leaves_a_finished_run_untouched(run_dir, tmp_path, bad, capsys):
+    # Issue 9 item 4: `--devices 4` on a finished directory exited 2 after rewriting config.json.
+    out = _copy(run_dir, tmp_path / "d")
+    before = _snapshot(out)
+    assert cli.main(ARGS + bad + ["--out", str(out), "--no-figures"]) == 2
+    assert _snapshot(out) == before
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_failed_command_creates_no_directory(tmp_path):
+    out = tmp_path / "new" / "run"
+    assert cli.main(ARGS + ["--devices", "4", "--out", str(out)]) == 2
+    assert not (tmp_path / "new").exists() or not out.exists()
+
+
+@pytest.mark.parametrize("argv,limit", [(["--alpha", "1e-40"], "1.18e-38"),
+                                        (["--alpha", "1e-300"], "1e-300")])
+def test_alpha_below_smallest_normal_is_refused(argv, limit, tmp_path, capsys):
+    # Issue 9 item 3: --alpha 1e-40 passed validation and gave NaN rows with exit 0.
+    out = tmp_path / "x"
+    assert cli.main(ARGS + argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--alpha" in err and limit in err and "greedy" in err
+    assert not out.exists()
+
+
+def test_alpha_below_smallest_normal_float64_is_refused(tmp_path, capsys):
+    out = tmp_path / "x"
+    assert cli.main(ARGS + ["--float64", "--alpha", "1e-320", "--out", str(out)]) == 2
+    assert "2.23e-308" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_tiny_normal_alpha_gives_finite_results(tmp_path):
+    out = tmp_path / "x"
+    assert cli.main(["regret", "--policies", "softmax", "--arms", "3", "--horizon", "50",
+                     "--seeds", "4", "--checkpoints", "4", "--no-progress", "--no-figures",
+                     "--alpha", "1e-37", "--out", str(out)]) == 0
+    res = io.load_npz(out / "results.npz")
+    assert np.isfinite(res["softmax__regret_rb"]).all()

@@ -24,7 +24,7 @@ which ``mujoco.rollout`` stops the trial) is flagged ``nan`` and is never a succ
 
 Randomisation (why outcomes are Bernoulli), drawn per trial by :func:`sample_noise`:
 
-* friction: sliding friction of the object's geoms ~ U[0.5, 1.0] (pads 0.3, table 0.5;
+* friction: sliding friction of the object's geoms ~ U[0.3, 0.8] (pads 0.3, table 0.5;
   MuJoCo takes the larger of a pair, so this is the pad-object and object-table value);
 * mass: object mass (and inertia) scaled by U[0.8, 1.25];
 * execution error of the grasp pose: x, y, z ~ N(0, 2 mm), θ ~ N(0, 0.05 rad), each

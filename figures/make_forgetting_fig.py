@@ -1,0 +1,48 @@
+"""Forgetting against adaptation for each core set, from experiments/core_set_forgetting.py.
+
+    python -m figures.make_forgetting_fig runs/forgetting   # -> runs/forgetting/forgetting.png
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def make_figure(run_dir: str | Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sern_jax import io
+
+    run_dir = Path(run_dir)
+    res = io.load_json(run_dir / "results.json")
+    fig, ax = plt.subplots(figsize=(5.2, 4.2))
+    t0 = res["theta0"]
+    ax.scatter(t0["new"]["roc_auc"], t0["d0"]["roc_auc"], marker="*", s=160, c="k",
+               label="θ0 (before fine-tuning)")
+    colours = {"none": "C0", "random": "C2", "dpp": "C3"}
+    for kind in ("none", "random", "dpp"):
+        rows = res.get(kind, [])
+        x = np.array([r["new"]["roc_auc"] for r in rows])
+        y = np.array([r["d0"]["roc_auc"] for r in rows])
+        ax.scatter(x, y, c=colours[kind], alpha=0.5, s=18)
+        ax.errorbar(x.mean(), y.mean(), xerr=x.std(), yerr=y.std(), fmt="o", c=colours[kind],
+                    ms=7, label=f"core set: {kind} (mean ± sd over {len(rows)} seeds)")
+    ax.set_xlabel("ROC-AUC on the new object's held-out poses (adaptation)")
+    ax.set_ylabel("ROC-AUC on D0-like objects (higher = less forgetting)")
+    ax.set_title("Fine-tuning θ0 on one hard object", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out = run_dir / "forgetting.png"
+    fig.savefig(out, dpi=130)
+    plt.close(fig)
+    return out
+
+
+if __name__ == "__main__":
+    print(make_figure(sys.argv[1] if len(sys.argv) > 1 else "runs/forgetting"))

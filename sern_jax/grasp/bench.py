@@ -70,6 +70,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="small sizes: native 32, MJX 8, depth 4, contexts 4, 1 repeat",
     )
+    p.add_argument("--quality-sets", type=int, default=16,
+                   help="64-candidate sets per quality-network scoring call (0 = skip)")
+    p.add_argument("--quality-batch", type=int, default=64,
+                   help="minibatch of the quality-network training-step timing")
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.set_defaults(func=run)
     return p
@@ -185,6 +189,9 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
 
 
 def run(args) -> int:
+    if getattr(args, "quality_sets", 0) < 0 or getattr(args, "quality_batch", 1) < 1:
+        raise ValueError(f"--quality-sets must be >= 0 and --quality-batch >= 1, got "
+                         f"{args.quality_sets}, {args.quality_batch}")
     import jax
     import numpy as np
 
@@ -335,6 +342,16 @@ def run(args) -> int:
             log(f"contexts P {num:6d}: {num / best:9.1f} contexts/s")
         out["contexts"] = rows
         stages["context_s"] = 1.0 / rows[-1]["contexts_per_s"]
+    if args.quality_sets > 0:
+        # The quality network beside the simulator in the same run: 64-candidate sets
+        # scored per second (crops + network, batched) and Adam steps per second.
+        from sern_jax.grasp import quality_net
+
+        qn = quality_net.benchmark(num_sets=args.quality_sets,
+                                   batch_size=args.quality_batch)
+        out["quality_net"] = qn
+        log(f"quality net: {qn['sets_scored_per_s']:.0f} sets of 64 scored/s, "
+            f"{qn['train_steps_per_s']:.0f} train steps/s (batch {args.quality_batch})")
     out["stages"] = stages
 
     if args.agreement:

@@ -299,8 +299,13 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     from sern_jax import io
     from sern_jax.grasp import artifacts
 
+    # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
+    # such even where θ0 is missing); the default objects come from θ0's screen
+    explicit = bool(args.objects) or bool(args.mesh)
+    specs = _specs(args.objects, args.mesh, ()) if explicit else None
     theta0 = artifacts.load_theta0(args.theta0)
-    specs = _specs(args.objects, args.mesh, artifacts.hard_set(theta0)["objects"])
+    if specs is None:
+        specs = _specs((), (), artifacts.hard_set(theta0)["objects"])
     t0 = time.perf_counter()
     out = Path(args.out) if args.out else Path("runs") / (
         "learn-" + online.run_fingerprint(config, [s.name for s in specs], theta0))

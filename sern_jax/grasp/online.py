@@ -357,6 +357,8 @@ def run(
     """
     out_dir = Path(out_dir)
     names = [s.name for s in specs]
+    if not names:
+        raise ValueError("no objects given")
     if len(set(names)) != len(names):
         raise ValueError(f"objects must be distinct, got {names}")
     theta0 = theta0 or artifacts.load_theta0()

@@ -128,6 +128,10 @@ def classification_metrics(prob: np.ndarray, label: np.ndarray,
     prob = np.asarray(prob, np.float64)
     label = np.asarray(label).astype(bool)
     target = label.astype(np.float64) if freq is None else np.asarray(freq, np.float64)
+    if len(prob) == 0:  # e.g. no validation objects (fewer than 10 in D0): NaN, no warnings
+        nan = float("nan")
+        return {"n": 0, "accuracy": nan, "accuracy_majority_class": nan, "roc_auc": nan,
+                "positive_rate": nan, "brier": nan, "ece": nan, "reliability": []}
     pos, neg = prob[label], prob[~label]
     if len(pos) and len(neg):
         order = np.argsort(np.concatenate([pos, neg]), kind="mergesort")
@@ -306,6 +310,8 @@ def pretrain(
     obj = arrays["object_index"][ctx]
     log(f"D0: {len(label):,} labelled grasps from {data_config.num_objects} objects "
         f"({label.mean():.1%} successes); crops in {time.perf_counter() - t:.1f} s")
+    if config.core_k > len(label):  # fail before training, not after
+        raise ValueError(f"core set k = {config.core_k} exceeds D0's {len(label)} grasps")
     # validation split by object (every 10th object), for the training curve only
     val = obj % 10 == 9
     tr = ~val

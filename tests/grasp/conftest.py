@@ -43,3 +43,42 @@ def paired_trials(box_model, centred_grasp):
     grasps = centred_grasp + offsets
     noise = sim.sample_noise(jax.random.key(11), MJX_BATCH)
     return grasps, noise
+
+
+# ----------------------------------------------------------------------------- learning
+# Shared by test_dataset / test_pretrain / test_online / test_learn_cli. Tiny sizes: every
+# compiled function (crops, the batched choose / fit of online.run) compiles once per session.
+
+TINY_DATASET = dict(seed=0, num_objects=2, poses_per_object=2, objects_per_shard=1)
+CORE_K = 6
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory):
+    """A finished 2-object x 2-pose D0 (one shard per object): (config, directory)."""
+    from sern_jax.grasp import dataset
+
+    config = dataset.DatasetConfig(**TINY_DATASET)
+    out = tmp_path_factory.mktemp("d0")
+    dataset.generate(config, out, progress=False, log=lambda *_: None)
+    return config, out
+
+
+@pytest.fixture(scope="session")
+def tiny_theta0():
+    """A θ0 made in the test: randomly initialised network and a random core set."""
+    from sern_jax.grasp import artifacts
+    from sern_jax.grasp import quality_net as qn
+
+    network = qn.make_quality_network()
+    params = network.init(jax.random.key(0))
+    s = network.config.crop_size
+    rng = np.random.default_rng(0)
+    core = {}
+    for kind in ("dpp", "random"):
+        core[f"{kind}_image"] = rng.normal(0.0, 0.01, (CORE_K, s, s)).astype(np.float32)
+        core[f"{kind}_depth"] = rng.uniform(0.55, 0.6, CORE_K).astype(np.float32)
+        core[f"{kind}_label"] = (rng.random(CORE_K) < 0.5).astype(np.float32)
+        core[f"{kind}_index"] = np.arange(CORE_K)
+    return artifacts.Theta0(network, params, core, manifest={}, fingerprint="test",
+                            screen=None)

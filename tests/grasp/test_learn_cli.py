@@ -1,0 +1,121 @@
+"""Tests for sern_jax.grasp.learn_cli (Table I rows and formatting, the learn outputs) and
+sern_jax.reproduce (its summary helpers, and an early clear error without θ0)."""
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from sern_jax import io, reproduce
+from sern_jax.grasp import artifacts, learn_cli, online
+
+
+def _paper_eval():
+    """[R + 1 = 3, O = 1, Q = 2, S = 2] success fractions."""
+    x = np.zeros((3, 1, 2, 2))
+    x[:, 0, 0] = [[0.4, 0.6], [0.2, 0.4], [0.6, 0.6]]  # sern: θ0 50, rounds 30, 60
+    x[:, 0, 1] = [[0.2, 0.2], [0.0, 0.0], [0.4, 0.2]]  # greedy: round 1 = 0
+    return x
+
+
+def test_table_rows_max_and_improvement():
+    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval())
+    sern, greedy = rows
+    assert sern["theta0"] == pytest.approx(50.0)
+    assert sern["rounds"] == pytest.approx([30.0, 60.0])
+    assert sern["std"] == pytest.approx([10.0, 0.0])
+    assert sern["max"] == pytest.approx(60.0)
+    assert sern["imprv"] == pytest.approx((60.0 - 30.0) / 30.0)  # (r_R - r_1) / r_1
+    assert greedy["rounds"] == pytest.approx([0.0, 30.0])
+    assert greedy["max"] == pytest.approx(30.0)
+    assert greedy["imprv"] is None  # r_1 = 0: undefined
+    assert "lowvar_rounds" not in sern
+    lowvar = np.full((3, 1, 2, 2), 0.5)
+    with_lv = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
+    assert with_lv[0]["lowvar_rounds"] == pytest.approx([50.0] * 3)
+    # a NaN low-variance array (evaluation off) leaves the columns out
+    nan_lv = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar * np.nan)
+    assert "lowvar_rounds" not in nan_lv[0]
+
+
+def test_format_table():
+    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval())
+    text = learn_cli.format_table(rows)
+    lines = text.splitlines()
+    assert lines[0] == "| Obj. | Alg. | θ0 | Round 1 | Round 2 | Max. | Imprv. |"
+    assert lines[1] == "|---|---|---|---|---|---|---|"
+    assert lines[2] == "| box | sern | 50% | 30% (±10.00) | 60% (±0.00) | 60% | 100% |"
+    assert lines[3] == "| box | greedy | 20% | 0% (±0.00) | 30% (±10.00) | 30% | — |"
+    assert len(lines) == 4
+    # a decline is a negative improvement
+    declining = [dict(rows[0], rounds=[80.0, 60.0], max=80.0, imprv=-0.25)]
+    assert learn_cli.format_table(declining).splitlines()[2].endswith("| 80% | -25% |")
+
+
+def test_format_table_with_lowvar():
+    lowvar = np.zeros((3, 1, 2, 2))
+    lowvar[:, 0, 0] = [[0.5, 0.7], [0.6, 0.6], [1.0, 0.8]]
+    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
+    lines = learn_cli.format_table(rows).splitlines()
+    i = lines.index("| Obj. | Alg. | R0 | R1 | R2 |")
+    assert lines[i + 2] == "| box | sern | 60% (±10.0) | 60% (±0.0) | 90% (±10.0) |"
+    assert lines[i + 3] == "| box | greedy | 0% (±0.0) | 0% (±0.0) | 0% (±0.0) |"
+
+
+def test_write_learn_outputs(tmp_path, tiny_theta0):
+    config = online.OnlineConfig(policies=("sern", "greedy"), num_seeds=2, rounds=2)
+    pe = _paper_eval()
+    results = online.RoundResults(pe, pe, pe, np.zeros(pe.shape + (3,), np.int32))
+    table = online.table_rows(["box"], config.policies, pe, pe)
+    res = {"table": table, "results": results, "objects": ["box"], "fingerprint": "f" * 16,
+           "config": config, "timings": {"contexts": 1.0, "choose": 3.0}}
+    learn_cli.write_learn_outputs(tmp_path, res, 4.0, tiny_theta0)
+    assert (tmp_path / "table.md").read_text() == learn_cli.format_table(table) + "\n"
+    assert json.loads((tmp_path / "table.json").read_text())["table"] == table
+    cfg = io.load_json(tmp_path / "config.json")
+    assert cfg["theta0"] == "test" and cfg["config"]["policies"] == ["sern", "greedy"]
+    np.testing.assert_array_equal(io.load_npz(tmp_path / "results.npz")["paper_eval"], pe)
+    assert "choose 3 s (75%)" in (tmp_path / "report.md").read_text()
+
+
+def test_check_out_refuses_a_file(tmp_path):
+    f = tmp_path / "f"
+    f.write_text("")
+    with pytest.raises(ValueError, match="not a directory"):
+        learn_cli._check_out(str(f))
+    learn_cli._check_out(str(tmp_path / "new" / "deeper"))  # a creatable path is fine
+
+
+# ----------------------------------------------------------------------------- reproduce
+
+
+def test_reproduce_summary_helpers():
+    table = [
+        {"object": "a", "policy": "sern", "rounds": [40.0, 80.0]},
+        {"object": "a", "policy": "greedy", "rounds": [40.0, 60.0]},
+        {"object": "b", "policy": "sern", "rounds": [40.0, 20.0]},
+        {"object": "b", "policy": "greedy", "rounds": [40.0, 60.0]},
+        {"object": "c", "policy": "sern", "rounds": [40.0, 60.0]},
+        {"object": "c", "policy": "greedy", "rounds": [40.0, 60.0]},
+    ]
+    assert reproduce._sern_vs(table, "greedy") == (1, 1)  # a better, b worse, c tied
+    assert reproduce._sern_vs(table, "egreedy") == (0, 0)
+    summary = {"policies": {"sern": {"regret_T_mean": 12.34}, "ucb": {"regret_T_mean": 5}}}
+    assert reproduce._regret_line(summary) == "sern R_T=12.3, ucb R_T=5.0"
+    assert reproduce._regret_line({"policies": {"x": {}}}) == "see regret/report.md"
+
+
+def test_reproduce_without_theta0_fails_before_any_work(tmp_path, monkeypatch):
+    monkeypatch.setattr(artifacts, "DATA_DIR", tmp_path / "no_theta0")
+    artifacts._load.cache_clear()
+
+    def unreachable(*a, **k):
+        raise AssertionError("reproduce started work without θ0")
+
+    args = argparse.Namespace(quick=True, out=str(tmp_path / "run"), no_progress=True)
+    with pytest.raises(ValueError, match="no pretrained network"):
+        reproduce.run(args, check_run=unreachable, regret_defaults=None,
+                      run_regret=unreachable, regret_figures=unreachable,
+                      learn_figures=unreachable)
+    assert not (tmp_path / "run").exists()

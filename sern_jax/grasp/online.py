@@ -70,6 +70,7 @@ __all__ = [
 ]
 
 POLICIES = ("sern", "sern_log", "egreedy", "greedy")
+CHECKPOINT_VERSION = 2  # bump when the checkpoint's contents change (2: explore_action)
 EXPLORE_CONTEXT, EXPLORE_TRIAL, POLICY_UNIFORM, FIT = 0, 1, 2, 3
 EVAL_CONTEXT, EVAL_TRIAL, EVAL_UNIFORM, LOWVAR_CONTEXT, LOWVAR_TRIAL = 4, 5, 6, 7, 8
 
@@ -229,7 +230,7 @@ def make_choose(network, policies: tuple[str, ...], crop_config=crops_lib.CropCo
     return choose
 
 
-@functools.lru_cache(maxsize=None)
+@functools.lru_cache(maxsize=16)
 def _batched_choose(network, policies, crop_config):
     # params [O, S, Q, ...]; depth [O, S, N, H, W]; candidates [O, S, N, K, ...];
     # u [O, S, N]; alphas [Q]; epsilon [].
@@ -238,11 +239,17 @@ def _batched_choose(network, policies, crop_config):
     return jax.jit(jax.vmap(per_seed, (0, 0, 0, 0, None, None)))
 
 
-def _fit_one(network, config: OnlineConfig):
+def _fit_settings(config: OnlineConfig) -> tuple:
+    """What the compiled update depends on (not seeds, objects, α or policies)."""
+    return (config.learning_rate, config.loss, config.batch_size, config.fit_steps)
+
+
+def _fit_one(network, settings: tuple):
     """One copy's update: ``fit(key, params, opt_state, buffer, core)`` on D ∪ C."""
-    optimizer = optax.adam(config.learning_rate)
-    fit = qn.make_fit(network, optimizer, loss=config.loss, batch_size=config.batch_size,
-                      num_steps=config.fit_steps)
+    learning_rate, loss, batch_size, fit_steps = settings
+    optimizer = optax.adam(learning_rate)
+    fit = qn.make_fit(network, optimizer, loss=loss, batch_size=batch_size,
+                      num_steps=fit_steps)
 
     def one(key, params, opt_state, buffer, core):
         data = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), buffer, core)
@@ -251,9 +258,9 @@ def _fit_one(network, config: OnlineConfig):
     return one, optimizer
 
 
-@functools.lru_cache(maxsize=None)
-def _batched_fit(network, config: OnlineConfig):
-    one, optimizer = _fit_one(network, config)
+@functools.lru_cache(maxsize=8)
+def _batched_fit(network, settings: tuple):
+    one, optimizer = _fit_one(network, settings)
     # keys [O, S]; params/opt_state [O, S, Q]; buffer [O, S, Q, cap]; core shared.
     over_q = jax.vmap(one, (None, 0, 0, 0, None))
     over_s = jax.vmap(over_q, (0, 0, 0, 0, None))
@@ -304,7 +311,8 @@ def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.nda
 
 def run_fingerprint(config: OnlineConfig, names: list[str], theta0) -> str:
     """What determines a run's results: the config, the objects and θ0."""
-    text = config.fingerprint() + json.dumps(list(names)) + theta0.fingerprint
+    text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(list(names))
+            + theta0.fingerprint)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -376,7 +384,7 @@ def run(
     epsilon = jnp.float32(config.epsilon)
     choose = _batched_choose(network, config.policies, crops_lib.CropConfig())
     greedy = _batched_choose(network, ("greedy",) * num_q, crops_lib.CropConfig())
-    fit, optimizer = _batched_fit(network, config)
+    fit, optimizer = _batched_fit(network, _fit_settings(config))
 
     # State: parameter copies [O, S, Q], optimiser states, buffers D [O, S, Q, R*E].
     tile = lambda x: jnp.broadcast_to(x, (num_o, num_s, num_q) + x.shape)  # noqa: E731
@@ -556,7 +564,7 @@ class AskTell:
 
     One learner = one (object, seed, policy) copy of :func:`run`, with the same keys: given
     the same depth images it asks for the same grasps and, told the same rewards, makes the
-    same updates as the batched run (tests/grasp/test_online.py drives both with the
+    same updates as the batched run (tests/grasp/test_asktell.py drives both with the
     simulator). After every ``config.explore`` tells it updates θ on D ∪ C.
 
     Args:
@@ -582,7 +590,7 @@ class AskTell:
         self.camera = None
         self._choose = jax.jit(make_choose(self.network, (policy,), crops_lib.CropConfig()))
         self._greedy = jax.jit(make_choose(self.network, ("greedy",), crops_lib.CropConfig()))
-        one, self.optimizer = _fit_one(self.network, config)
+        one, self.optimizer = _fit_one(self.network, _fit_settings(config))
         self._fit = jax.jit(one)
         self._sample = jax.jit(lambda k, d, p: cand_lib.sample(
             self.context_config.candidates, k, d, p))

@@ -408,7 +408,7 @@ def _detergent_bottle() -> ObjectSpec:
     cap = cylinder_geom(
         0.011,
         0.012,
-        pos=(0.008, 0.0, 0.045),
+        pos=(0.008, 0.0, 0.044),
         quat=axis_angle_quat((0, 1, 0), math.radians(25)),
         sides=8,
     )

@@ -89,7 +89,10 @@ _GENERAL_RATE = 1.0e6
 
 
 def _check_cli_values(exp: RegretExperiment) -> None:
-    """Checks of the raw option values (before any float32 cast hides them), naming the flag."""
+    """Checks of the raw option values (before any float32 cast hides them), naming the flag.
+
+    ``--horizon`` is at most 2^24 in float32 (reward sums and counts stay exact integers) and
+    2^31 − 1 with ``--float64`` (int32 round counters)."""
     def integer(flag, value, low, high=None):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low \
                 or (high is not None and value > high):
@@ -103,7 +106,7 @@ def _check_cli_values(exp: RegretExperiment) -> None:
     integer("--arms", exp.num_arms, 2, 2**20)
     integer("--contexts", exp.num_contexts, 1, 2**20)
     integer("--seeds", exp.num_seeds, 1)
-    integer("--horizon", exp.horizon, 1)
+    integer("--horizon", exp.horizon, 1, 2**31 - 1 if exp.float64 else 2**24)
     integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
     integer("--chunk-size", exp.chunk_size, 1)
     integer("--devices", exp.devices, 1)
@@ -202,7 +205,7 @@ def check_fits(exp: RegretExperiment, triples, out_dir: Path) -> dict:
     free = shutil.disk_usage(probe).free
     if est["disk_bytes"] > free:
         raise ValueError(
-            f"the run needs up to {_fmt_bytes(est['disk_bytes'])} of disk under {out_dir}, "
+            f"the run needs up to {_fmt_bytes(est['disk_bytes'])} of disk under --out {out_dir}, "
             f"more than the {_fmt_bytes(free)} free; use fewer --seeds or --checkpoints")
     if est["seconds"] > _MAX_DAYS * 86400:
         raise ValueError(
@@ -331,6 +334,11 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             except ValueError:
                 raise ValueError(f"--devices {exp.devices}: only {len(jax.devices())} "
                                  f"device(s) visible") from None
+        probe = run_dir
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not probe.is_dir() or not os.access(probe, os.W_OK):
+            raise ValueError(f"--out {run_dir}: cannot create the run directory there")
         est = check_fits(exp, triples, run_dir)
         if est["seconds"] > 60 and progress:
             log(f"estimated run time ~{_fmt_time(est['seconds'])} "

@@ -165,6 +165,29 @@ def _validate(args) -> None:
         raise ValueError(f"--alpha must be finite and > 0, got {args.alpha}")
     if args.numpy_seeds == 1:
         raise ValueError("--numpy-seeds must be 0 (skip) or >= 2 (for a standard error)")
+    for name, value, high in (("--arms", args.arms, 2**20), ("--seeds", args.seeds, 2**31 - 1),
+                              ("--numpy-seeds", args.numpy_seeds, 2**31 - 1),
+                              ("--repeats", args.repeats, 1000),
+                              ("--general-repeats", args.general_repeats, 1000),
+                              ("--horizon", args.horizon, 2**24 - 1),
+                              ("--seed", args.seed, 2**32 - 1)):
+        if value > high:
+            raise ValueError(f"{name} must be <= {high}, got {value}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+
+
+def _check_memory(args, config) -> None:
+    """Refuses a workload whose outputs and per-seed state cannot fit in this machine's memory."""
+    from sern_jax import executor
+
+    need = args.seeds * executor.bytes_per_seed(config)
+    need += args.numpy_seeds * (4 * args.arms + 64) * 8  # the NumPy reference's state
+    avail = executor.available_memory_bytes()
+    if need > avail:
+        raise ValueError(
+            f"--seeds {args.seeds} x --arms {args.arms} needs about {need / 2**30:.3g} GiB of "
+            f"outputs and state, more than the {avail / 2**30:.3g} GiB available")
 
 
 # ----------------------------------------------------------------------------- main
@@ -185,6 +208,7 @@ def run(args) -> int:
     params = sim.default_params(config, problems.bernoulli(np.full(args.arms, 0.5)),
                                 alpha0=args.alpha)
     sim.validate(config, params, args.seeds)
+    _check_memory(args, config)
     if not fast_softmax.supports(config, params):
         raise ValueError(f"alpha={args.alpha} is below the fast path's minimum "
                          f"{fast_softmax.min_alpha(config.dtype)} for float32")

@@ -125,8 +125,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except ValueError as exc:
+    except (ValueError, OverflowError) as exc:
         print(f"sern: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a path that cannot be read or written: one line, no traceback
+        print(f"sern: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("sern: interrupted; completed chunks are saved, rerun the same command to resume",

@@ -36,6 +36,7 @@ __all__ = [
     "plan_run",
     "batched_runner",
     "bytes_per_seed",
+    "available_memory_bytes",
     "default_chunk_size",
     "host_workers",
     "concurrent_calls",
@@ -79,6 +80,18 @@ def bytes_per_seed(config: RunConfig) -> int:
     outputs = g * (k * (4 + item) + (5 + num_diag) * item)
     state = (4 * m * k + 16 * k + 64) * item
     return outputs + state
+
+
+def available_memory_bytes() -> int:
+    """Memory this machine can still give (``MemAvailable`` on Linux, else physical memory)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
 def host_workers() -> int:
@@ -189,6 +202,9 @@ def run_seeds(
     validate(config, params, num_seeds)
     if isinstance(first_seed, bool) or int(first_seed) < 0:
         raise ValueError(f"first_seed must be a non-negative integer, got {first_seed!r}")
+    if int(first_seed) + num_seeds > 2**32:
+        raise ValueError(f"seed indices are uint32: first_seed + num_seeds must be <= 2^32, "
+                         f"got {int(first_seed) + num_seeds}")
     plan = plan_run(config, params, num_seeds, mesh=mesh, chunk_size=chunk_size, runner=runner)
     root = jax.random.key(seed)
     sharding = None

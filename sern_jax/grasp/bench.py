@@ -79,6 +79,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+_MAX_BATCH = 65_536  # trials or poses per call: far above any useful benchmark size
+
+
 def _csv_ints(text: str, name: str) -> list[int]:
     if not text.strip():
         return []
@@ -86,9 +89,48 @@ def _csv_ints(text: str, name: str) -> list[int]:
         values = [int(v) for v in text.split(",")]
     except ValueError as e:
         raise ValueError(f"{name} must be comma-separated ints, got {text!r}") from e
-    if min(values) < 1:
-        raise ValueError(f"{name} must be >= 1, got {values}")
+    if min(values) < 1 or max(values) > _MAX_BATCH:
+        raise ValueError(f"{name} values must lie in [1, {_MAX_BATCH}], got {text!r}")
     return values
+
+
+def _validate(args) -> None:
+    """Every option, before any benchmarking (also those that ``--quick`` replaces)."""
+    import os
+    from pathlib import Path
+
+    for flag, text in (("--native-batch", args.native_batch), ("--mjx-batch", args.mjx_batch),
+                       ("--context-poses", args.context_poses)):
+        _csv_ints(text, flag)
+    if not args.native_batch.strip():
+        raise ValueError("--native-batch must name at least one batch size")
+    for flag, value, low, high in (("--depth-batch", args.depth_batch, 0, 4096),
+                                   ("--repeats", args.repeats, 1, 1000),
+                                   ("--agreement", args.agreement, 0, 100_000),
+                                   ("--quality-sets", args.quality_sets, 0, 100_000),
+                                   ("--quality-batch", args.quality_batch, 1, _MAX_BATCH)):
+        if not low <= value <= high:
+            raise ValueError(f"{flag} must lie in [{low}, {high}], got {value}")
+    if args.threads is not None and not 1 <= args.threads <= 4096:
+        raise ValueError(f"--threads must lie in [1, 4096], got {args.threads}")
+    if args.out is not None:
+        out = Path(args.out)
+        if out.is_dir():
+            raise ValueError(f"--out {out} is a directory; name a file")
+        parent = out.parent if str(out.parent) else Path(".")
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            raise ValueError(f"--out {out}: cannot write in {parent}")
+    if args.agreement:
+        from sern_jax.grasp import objects as objects_lib
+
+        names = [n for n in args.agreement_objects.split(",") if n]
+        if not names:
+            raise ValueError("--agreement-objects is empty")
+        for n in names:
+            try:
+                objects_lib.resolve_object(n)
+            except ValueError as e:
+                raise ValueError(f"--agreement-objects: {e}") from None
 
 
 def _first_and_best(call, repeats):
@@ -189,9 +231,10 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
 
 
 def run(args) -> int:
-    if getattr(args, "quality_sets", 0) < 0 or getattr(args, "quality_batch", 1) < 1:
-        raise ValueError(f"--quality-sets must be >= 0 and --quality-batch >= 1, got "
-                         f"{args.quality_sets}, {args.quality_batch}")
+    from sern_jax.grasp.show import import_mjx_quietly
+
+    import_mjx_quietly()
+    _validate(args)
     import jax
     import numpy as np
 

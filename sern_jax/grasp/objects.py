@@ -689,6 +689,9 @@ def make_object(name: str) -> ObjectSpec:
     match = _POPULATION_NAME.fullmatch(name)
     if match and match["kind"] in POPULATION_KINDS:
         seed, index = int(match["seed"]), int(match["index"])
+        if seed > 2**32 - 1 or index > 2**31 - 1:
+            raise ValueError(f"population object {name!r}: the seed must lie in [0, 2^32 - 1] "
+                             f"and the index in [0, 2^31 - 1]")
         spec = sample_object(jax.random.fold_in(jax.random.key(seed), index))
         spec = dataclasses.replace(spec, name=f"{spec.kind}_{seed}_{index}")
         if spec.kind != match["kind"]:

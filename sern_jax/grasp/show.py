@@ -219,6 +219,23 @@ def _render_scene(path, model, grasp, title) -> None:
     plt.close(fig)
 
 
+def import_mjx_quietly() -> None:
+    """Imports ``mujoco.mjx`` (through ``sern_jax.grasp._mjx``) dropping its "Failed to import
+    warp / mujoco_warp" notices (the optional warp backend is not used); other output passes."""
+    import contextlib
+    import io as _io
+
+    buf = _io.StringIO()
+    with contextlib.redirect_stderr(buf):
+        from sern_jax.grasp import _mjx  # noqa: F401
+    for line in buf.getvalue().splitlines():
+        if not line.startswith(("Failed to import warp", "Failed to import mujoco_warp")):
+            print(line, file=sys.stderr)
+
+
+_MAX_TRIALS = 4096  # 64 candidates x 4096 trials = 262,144 grasps: minutes, ~1 GB
+
+
 def run(args) -> int:
     """Entry point of ``sern grasp show``; returns the exit code."""
     if args.gl != "auto":
@@ -226,13 +243,27 @@ def run(args) -> int:
     elif "MUJOCO_GL" not in os.environ and sys.platform.startswith("linux"):
         os.environ["MUJOCO_GL"] = "egl"
 
+    try:  # MUJOCO_GL is read when mujoco is imported: a missing backend fails right here
+        import mujoco  # noqa: F401
+    except Exception as exc:  # noqa: BLE001 - PyOpenGL raises AttributeError, OSError, ...
+        raise ValueError(
+            f"--gl {args.gl}: MuJoCo cannot load the OpenGL backend "
+            f"MUJOCO_GL={os.environ.get('MUJOCO_GL')} ({type(exc).__name__}: {exc}); install "
+            f"it (osmesa: libosmesa6) or choose another --gl") from None
+    import_mjx_quietly()
     from sern_jax.grasp import objects as objects_lib
 
     if args.list:
         print("\n".join(objects_lib.object_names()))
         return 0
-    if args.trials < 0:
-        raise ValueError(f"--trials must be >= 0, got {args.trials}")
+    if not 0 <= args.trials <= _MAX_TRIALS:
+        raise ValueError(
+            f"--trials must lie in [0, {_MAX_TRIALS}] (64 candidates x {args.trials} trials "
+            f"would be {64 * args.trials:,} simulated grasps), got {args.trials}")
+    if not 0 <= args.seed <= 2**32 - 1:
+        raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
+    if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise ValueError(f"--out {args.out} exists and is not a directory")
     if (args.object is None) == (args.mesh is None):
         raise ValueError(
             "give exactly one of OBJECT or --mesh PATH (see --help, --list)"
@@ -253,9 +284,13 @@ def run(args) -> int:
 
     safe_name = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name)
     out = args.out or os.path.join("runs", f"show_{safe_name}_s{args.seed}")
-    run_dir = io.make_run_dir(
-        os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out))
-    )
+    try:
+        run_dir = io.make_run_dir(
+            os.path.dirname(os.path.abspath(out)), os.path.basename(os.path.abspath(out))
+        )
+    except OSError as exc:
+        raise ValueError(f"--out {out}: cannot create the directory ({exc.strerror or exc})") \
+            from None
     root = jax.random.key(args.seed)
     key_trials = jax.random.fold_in(root, TRIAL_STREAM)
     timings = {}

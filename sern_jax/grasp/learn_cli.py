@@ -34,16 +34,29 @@ def _positive_int(text: str) -> int:
 
 
 def _check_out(path: str | None, what: str = "--out") -> None:
+    """Refuses an output path that cannot become a directory, before any work; leaves
+    nothing behind (a directory made only to test this is removed again)."""
     if path is None:
         return
     p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise ValueError(f"{what} {path} exists and is not a directory")
-    parent = p if p.exists() else p.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not os.access(parent, os.W_OK):
-        raise ValueError(f"{what} {path}: {parent} is not writable")
+    if p.exists():
+        if not p.is_dir():
+            raise ValueError(f"{what} {path} exists and is not a directory")
+        if not os.access(p, os.W_OK):
+            raise ValueError(f"{what} {path} is not writable")
+        return
+    made = []
+    try:
+        for parent in reversed([p, *p.parents]):
+            if not parent.exists():
+                parent.mkdir()
+                made.append(parent)
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: cannot create this directory "
+                         f"({exc.strerror or exc})") from None
+    finally:
+        for d in reversed(made):
+            d.rmdir()
 
 
 # ----------------------------------------------------------------------------- dataset
@@ -122,11 +135,11 @@ def add_pretrain_parser(subparsers) -> argparse.ArgumentParser:
 
 def _run_pretrain(args) -> int:
     _check_out(args.out)
+    if not (args.lr > 0):
+        raise ValueError(f"--lr must be > 0, got {args.lr}")
     if not Path(args.data, "config.json").exists():
         raise ValueError(f"--data {args.data} is not a dataset directory; make one with "
                          "`sern grasp dataset --out DIR`")
-    if not (args.lr > 0):
-        raise ValueError(f"--lr must be > 0, got {args.lr}")
     from sern_jax import io
     from sern_jax.grasp import artifacts, objects, pretrain
 

@@ -184,6 +184,8 @@ def add_screen_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("objects", nargs="*", metavar="OBJECT",
                    help="object names (default: every named object)")
     p.add_argument("--mesh", action="append", default=[], metavar="PATH")
+    p.add_argument("--mesh-units", choices=_MESH_UNITS, default="auto",
+                   help="units of the mesh files' coordinates (as in `sern grasp show`)")
     p.add_argument("--poses", type=_positive_int, default=8)
     p.add_argument("--trials", type=_positive_int, default=8)
     p.add_argument("--theta0", default=None, help="θ0 directory (default: the shipped one)")
@@ -194,12 +196,15 @@ def add_screen_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _specs(names, meshes, default_names):
+_MESH_UNITS = ("auto", "m", "cm", "mm")
+
+
+def _specs(names, meshes, default_names, units="auto"):
     from sern_jax.grasp import objects
 
     names = list(names) or ([] if meshes else list(default_names))
-    specs = [objects.resolve_object(n) for n in names]
-    specs += [objects.load_mesh(m) for m in meshes]
+    specs = [objects.resolve_object(n, units=units) for n in names]
+    specs += [objects.load_mesh(m, units=units) for m in meshes]
     if not specs:
         raise ValueError("no objects given")
     seen = set()
@@ -215,7 +220,8 @@ def _run_screen(args) -> int:
     from sern_jax.grasp import artifacts, objects, pretrain
 
     theta0 = artifacts.load_theta0(args.theta0)
-    specs = _specs(args.objects, args.mesh, objects.object_names())
+    specs = _specs(args.objects, args.mesh, objects.object_names(),
+                   getattr(args, "mesh_units", "auto"))
     rows = pretrain.screen(theta0.network, theta0.params, specs, args.poses, args.trials,
                            seed=args.seed, progress=not args.no_progress)
     _print_screen(rows)
@@ -245,6 +251,8 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
                    help="object names or .obj/.stl paths (default: the hard set)")
     p.add_argument("--mesh", action="append", default=[], metavar="PATH",
                    help="an OBJ/STL mesh (repeatable); any mesh `sern grasp show` takes")
+    p.add_argument("--mesh-units", choices=_MESH_UNITS, default="auto",
+                   help="units of the mesh files' coordinates (as in `sern grasp show`)")
     p.add_argument("--policies", default="sern,egreedy,greedy")
     p.add_argument("--seeds", type=_positive_int, default=5)
     p.add_argument("--rounds", type=_positive_int, default=5)
@@ -315,7 +323,8 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
     # such even where θ0 is missing); the default objects come from θ0's screen
     explicit = bool(args.objects) or bool(args.mesh)
-    specs = _specs(args.objects, args.mesh, ()) if explicit else None
+    units = getattr(args, "mesh_units", "auto")
+    specs = _specs(args.objects, args.mesh, (), units) if explicit else None
     theta0 = artifacts.load_theta0(args.theta0)
     if specs is None:
         specs = _specs((), (), artifacts.hard_set(theta0)["objects"])

@@ -29,6 +29,8 @@ import hashlib
 import math
 import os
 import re
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
@@ -745,95 +747,137 @@ def load_mesh(
     decompose: bool = False,
     max_parts: int = 8,
     max_vertices: int = 32,
-    require_watertight: bool = True,
+    require_watertight: bool = False,
+    log: Callable[[str], None] | None = None,
 ) -> ObjectSpec:
     """Loads an OBJ/STL mesh as an object spec (convex parts, metres, origin at centre).
 
-    Steps: load with trimesh; reject empty / non-finite / degenerate meshes; scale to
-    metres (``units``; ``"auto"`` picks the first of m, mm, cm that puts the largest
-    extent in 1.5-25 cm); reject absurd sizes (largest extent outside
-    [0.5 cm, 30 cm] after scaling, or thinner than 1 mm); check watertightness; centre the
-    bounding box at the origin; make convex: one convex hull (default), or a CoACD
-    decomposition into <= ``max_parts`` hulls when ``decompose=True`` and the optional
-    ``coacd`` package is installed. Hulls with more than ``max_vertices`` vertices are
-    reduced to that many by farthest-point subsampling of the hull vertices (MJX wants
-    <= 32 for convex-convex collisions).
+    Steps: read the file with trimesh (unprocessed, so that huge or tiny coordinates are
+    judged before vertices are merged); reject unreadable / empty / non-finite / degenerate
+    meshes; scale to metres (``units``; ``"auto"`` picks the first of m, mm, cm that puts
+    the largest extent in 1.5-25 cm, and reports the guess and the size in one line);
+    reject absurd sizes (largest extent outside [0.5 cm, 30 cm] after scaling, or thinner
+    than 1 mm); centre the bounding box at the origin; make convex: one convex hull
+    (default), or a CoACD decomposition into <= ``max_parts`` hulls when ``decompose=True``
+    and the optional ``coacd`` package is installed. Hulls with more than ``max_vertices``
+    vertices are reduced to that many by farthest-point subsampling of the hull vertices
+    (MJX wants <= 32 for convex-convex collisions).
+
+    Open or non-manifold meshes (most scans) are accepted: the object is made of convex
+    hulls, which need no watertight surface, and the default mass comes from the hull
+    volume. Such a mesh gets one warning line saying so (unless ``require_watertight``).
+
+    Every error is one line naming the file, what is wrong and, where one applies, the
+    ``sern`` flag to change (``--mesh-units``).
 
     Args:
       path: ``.obj`` or ``.stl`` file.
-      units: ``"auto"``, ``"m"``, ``"cm"`` or ``"mm"``.
+      units: ``"auto"``, ``"m"``, ``"cm"`` or ``"mm"`` (the CLI's ``--mesh-units``).
       mass: kg; default: 400 kg/m^3 times the hull volume clipped to [20 g, 500 g].
       decompose: use CoACD (``pip install coacd``) for a multi-part convex decomposition.
       max_parts: most convex parts kept with ``decompose``.
       max_vertices: most vertices per convex part (4..64).
-      require_watertight: reject open meshes (default True).
+      require_watertight: reject open meshes instead of warning (default False).
+      log: where the one-line notes go (the units guess, the watertightness warning);
+        default: standard error. Each distinct note is given once per process.
 
     Returns:
       ObjectSpec with category ``"mesh"`` and name ``"mesh:<file stem>"``.
 
     Raises:
       ValueError: missing file, unknown extension, unreadable / empty / non-finite /
-        degenerate / non-watertight mesh, absurd size, bad units, or ``decompose=True``
-        without coacd installed.
+        degenerate mesh, absurd size, bad units, non-watertight mesh with
+        ``require_watertight=True``, or ``decompose=True`` without coacd installed.
     """
     import trimesh
 
     path = Path(path)
+    name = repr(str(path))
     if units not in ("auto", *_UNIT_SCALES):
-        raise ValueError(f"units must be 'auto', 'm', 'cm' or 'mm', got {units!r}")
+        raise ValueError(
+            f"mesh units (--mesh-units) must be auto, m, cm or mm, got {units!r}"
+        )
     if not 4 <= max_vertices <= MAX_MESH_VERTICES:
         raise ValueError(
             f"max_vertices must be in [4, {MAX_MESH_VERTICES}], got {max_vertices}"
         )
     if path.suffix.lower() not in (".obj", ".stl"):
-        raise ValueError(f"mesh must be an .obj or .stl file, got {str(path)!r}")
+        raise ValueError(f"mesh must be an .obj or .stl file, got {name}")
     if not path.is_file():
-        raise ValueError(f"mesh file not found: {str(path)!r}")
+        raise ValueError(f"mesh file not found: {name}")
+    fmt = path.suffix[1:].upper()
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        # process=False: merging vertices at a fixed tolerance turns a 1e-9-sized mesh into
+        # one point and overflows on 1e30 coordinates; sizes are judged first, below.
+        raw = trimesh.load(str(path), force="mesh", process=False)
     except Exception as e:  # trimesh raises many types on garbage input
-        raise ValueError(f"could not read mesh {str(path)!r}: {e}") from e
-    if (
-        not isinstance(mesh, trimesh.Trimesh)
-        or len(mesh.vertices) < 4
-        or len(mesh.faces) < 4
-    ):
         raise ValueError(
-            f"mesh {str(path)!r} is empty or has fewer than 4 vertices/faces"
+            f"mesh {name} is not a readable mesh: not a valid {fmt} file"
+            + _read_error_detail(e)
+        ) from None
+    if not isinstance(raw, trimesh.Trimesh) or len(raw.faces) == 0:
+        raise ValueError(
+            f"mesh {name} is not a readable mesh: no triangles found in the {fmt} file"
         )
-    verts = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(raw.faces, dtype=np.int64)
+    all_verts = np.asarray(raw.vertices, dtype=np.float64)
+    if faces.min() < 0 or faces.max() >= len(all_verts):
+        raise ValueError(
+            f"mesh {name} is not a readable mesh: faces refer to missing vertices"
+        )
+    used, faces = np.unique(faces, return_inverse=True)
+    faces = faces.reshape(-1, 3)
+    verts = all_verts[used]
     if not np.all(np.isfinite(verts)):
-        raise ValueError(f"mesh {str(path)!r} has non-finite vertex coordinates")
-    extent = verts.max(0) - verts.min(0)
-    if extent.max() <= 0:
-        raise ValueError(f"mesh {str(path)!r} is degenerate (all vertices coincide)")
+        raise ValueError(f"mesh {name} has non-finite (nan or inf) vertex coordinates")
+    num_distinct = len(np.unique(verts, axis=0))
+    if num_distinct < 4:
+        raise ValueError(
+            f"mesh {name} has only {num_distinct} distinct vertices; a solid needs at least 4"
+        )
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = verts.max(0) - verts.min(0)
+    largest = float(extent.max())  # inf where coordinates of ~1e308 overflow
+    allowed = (f"allowed {100 * MESH_MIN_EXTENT_M:g}-{100 * MESH_MAX_EXTENT_M:g} cm")
     if units == "auto":
         for unit in ("m", "mm", "cm"):
-            if 0.015 <= extent.max() * _UNIT_SCALES[unit] <= 0.25:
+            if 0.015 <= largest * _UNIT_SCALES[unit] <= 0.25:
                 break
         else:
             raise ValueError(
-                f"mesh {str(path)!r} has an absurd size: largest extent {extent.max():g} (file "
-                "units) is not 1.5-25 cm in m, mm or cm; pass units= explicitly"
+                f"mesh {name} has an absurd size: its largest extent is {largest:.3g} in "
+                "the file's units, not 1.5-25 cm whether read as m, cm or mm; give the "
+                f"units with --mesh-units m|cm|mm ({allowed}) or rescale the file"
             )
-    scale = _UNIT_SCALES[unit if units == "auto" else units]
+    else:
+        unit = units
+    scale = _UNIT_SCALES[unit]
     verts = verts * scale
     extent = extent * scale
     if not MESH_MIN_EXTENT_M <= extent.max() <= MESH_MAX_EXTENT_M:
         raise ValueError(
-            f"mesh {str(path)!r} has an absurd size: largest extent "
-            f"{extent.max():.4g} m (allowed {MESH_MIN_EXTENT_M}-{MESH_MAX_EXTENT_M} m)"
+            f"mesh {name} has an absurd size: largest extent {extent.max():.3g} m read "
+            f"with --mesh-units {unit} ({allowed}); check --mesh-units or rescale the file"
         )
     if extent.min() < 0.001:
         raise ValueError(
-            f"mesh {str(path)!r} is flat: smallest extent {extent.min():.3g} m "
-            "< 1 mm (a sheet cannot be simulated)"
+            f"mesh {name} is flat: smallest extent {extent.min():.3g} m < 1 mm read with "
+            f"--mesh-units {unit} (a sheet cannot be simulated)"
         )
-    if require_watertight and not mesh.is_watertight:
+    if units == "auto":
+        size = " x ".join(f"{100 * e:.3g}" for e in extent)
+        _note(
+            log,
+            f"mesh {name}: --mesh-units auto read the file as {unit}: size {size} cm "
+            "(if wrong, give --mesh-units m|cm|mm)",
+        )
+    mesh = trimesh.Trimesh(vertices=verts, faces=faces, process=True)
+    watertight = bool(mesh.is_watertight)
+    if require_watertight and not watertight:
         raise ValueError(
-            f"mesh {str(path)!r} is not watertight (open or non-manifold); "
-            "repair it or pass require_watertight=False"
+            f"mesh {name} is not watertight (open or non-manifold); repair it"
         )
+    verts = np.asarray(mesh.vertices, dtype=np.float64)
     centre = (verts.max(0) + verts.min(0)) / 2
     verts = verts - centre
     if decompose:
@@ -855,17 +899,63 @@ def load_mesh(
     hull_volume = sum(g.volume for g in geoms)
     if not hull_volume > 1e-9:
         raise ValueError(
-            f"mesh {str(path)!r} has (near) zero volume {hull_volume:.3g} m^3"
+            f"mesh {name} has (near) zero volume {hull_volume:.3g} m^3"
         )
     if mass is None:
         mass = float(np.clip(400.0 * hull_volume, MIN_MASS_KG, MAX_MASS_KG))
+        clipped = "" if mass == 400.0 * hull_volume else (
+            f", clipped to {1000 * MIN_MASS_KG:.0f}-{1000 * MAX_MASS_KG:.0f} g")
+        how = (f"mass {1000 * mass:.0f} g estimated from the hull volume "
+               f"({1e6 * hull_volume:.3g} cm^3 at 400 kg/m^3{clipped})")
     elif not (math.isfinite(mass) and 0 < mass <= 20.0):
         raise ValueError(f"mass must be in (0, 20] kg, got {mass}")
+    else:
+        how = f"mass {1000 * mass:.0f} g as given"
+    if not watertight:
+        hulls = "convex hull" if len(geoms) == 1 else f"{len(geoms)} convex parts"
+        _note(
+            log,
+            f"warning: mesh {name} is not watertight (open or non-manifold); the object is "
+            f"its {hulls}, {how}",
+        )
     return ObjectSpec(f"mesh:{path.stem}", geoms, float(mass), "mesh", "mesh")
 
 
-def resolve_object(name_or_path: str) -> ObjectSpec:
-    """An object name (``object_names()``) or a path to an .obj/.stl mesh."""
+_NOTED: set[str] = set()
+
+
+def _note(log: Callable[[str], None] | None, line: str) -> None:
+    """Gives ``line`` to ``log`` (default: one line on stderr), once per process."""
+    if line in _NOTED:
+        return
+    _NOTED.add(line)
+    if log is None:
+        print(line, file=sys.stderr, flush=True)
+    else:
+        log(line)
+
+
+def _read_error_detail(exc: BaseException) -> str:
+    """A short reason from trimesh's exception, or "" where it would mislead.
+
+    Random bytes in an .stl make trimesh try the ASCII reader, whose text decoding fails
+    with a missing-module or unicode error that says nothing about the file.
+    """
+    if isinstance(exc, (ImportError, UnicodeError, MemoryError)):
+        return " (neither binary nor text)"
+    if isinstance(exc, IndexError):
+        return " (faces refer to missing vertices)"
+    text = " ".join(str(exc).split())
+    if not text or len(text) > 120:
+        return ""
+    return f" ({text})"
+
+
+def resolve_object(name_or_path: str, units: str = "auto") -> ObjectSpec:
+    """An object name (``object_names()``) or a path to an .obj/.stl mesh.
+
+    ``units`` (``--mesh-units``) applies to mesh paths only.
+    """
     if str(name_or_path).lower().endswith((".obj", ".stl")):
-        return load_mesh(name_or_path)
+        return load_mesh(name_or_path, units=units)
     return make_object(name_or_path)

@@ -66,7 +66,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--mesh-units",
         choices=("auto", "m", "cm", "mm"),
         default="auto",
-        help="units of the mesh file's coordinates (default auto: objects.load_mesh guesses)",
+        help="units of the mesh file's coordinates (default auto: guessed from the size; "
+        "the guess and the resulting size are printed)",
     )
     p.add_argument("--list", action="store_true", help="list the object names and exit")
     p.add_argument(

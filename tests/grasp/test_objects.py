@@ -103,8 +103,8 @@ def test_bad_meshes_raise_clearly(tmp_path):
     open_box.update_faces(np.arange(len(open_box.faces)) != 0)  # drop one triangle
     open_path = tmp_path / "open.obj"
     open_box.export(open_path)
-    with pytest.raises(ValueError, match="watertight"):
-        objects.load_mesh(open_path)
+    with pytest.raises(ValueError, match="watertight"):  # open meshes load by default
+        objects.load_mesh(open_path, require_watertight=True)
     huge = tmp_path / "huge.stl"
     trimesh.creation.box((40.0, 40.0, 40.0)).export(huge)
     with pytest.raises(ValueError, match="absurd size"):

@@ -259,7 +259,7 @@ def test_learn_cli_zero_rounds_is_an_argument_error(capsys):
 
 @pytest.mark.parametrize("argv, match", [
     (["--policies", "foo"], "unknown policy"),
-    (["--mesh", "BROKEN"], "could not read mesh"),
+    (["--mesh", "BROKEN"], "not a readable mesh"),
 ])
 def test_learn_cli_subprocess_one_line_no_traceback(argv, match, tmp_path):
     broken = tmp_path / "broken.obj"

@@ -37,6 +37,8 @@ __all__ = [
     "CORE_SET_KINDS",
     "install",
     "hard_set",
+    "tree_arrays",
+    "tree_from_arrays",
 ]
 
 DATA_DIR = Path(__file__).resolve().with_name("data")
@@ -168,3 +170,16 @@ def hard_set(theta0: Theta0, num: int = 6) -> dict:
     chosen = rows[:num]
     return {"objects": [r["object"] for r in chosen],
             "meets_rule": [bool(r["hard"]) for r in chosen], "rows": chosen}
+
+
+def tree_arrays(tree, prefix: str) -> dict[str, np.ndarray]:
+    """The leaves of ``tree`` as ``{f"{prefix}{i}": array}``: a pytree in a checkpoint npz
+    (``online.run``, ``online.AskTell``, ``pretrain``; read back by :func:`tree_from_arrays`)."""
+    return {f"{prefix}{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(tree))}
+
+
+def tree_from_arrays(saved: dict, template, prefix: str):
+    """The pytree of ``template``'s structure whose leaves :func:`tree_arrays` saved."""
+    num = len(jax.tree.leaves(template))
+    return jax.tree.unflatten(jax.tree.structure(template),
+                              [jnp.asarray(saved[f"{prefix}{i}"]) for i in range(num)])

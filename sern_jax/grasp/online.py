@@ -410,10 +410,8 @@ def run(
         if str(saved["fingerprint"]) != fingerprint:
             raise ValueError(f"{out_dir} holds a different learning run; choose another --out "
                              "or delete it")
-        leaves = [saved[f"p{i}"] for i in range(len(jax.tree.leaves(params)))]
-        params = jax.tree.unflatten(jax.tree.structure(params), leaves)
-        oleaves = [saved[f"o{i}"] for i in range(len(jax.tree.leaves(opt_state)))]
-        opt_state = jax.tree.unflatten(jax.tree.structure(opt_state), oleaves)
+        params = artifacts.tree_from_arrays(saved, params, "p")
+        opt_state = artifacts.tree_from_arrays(saved, opt_state, "o")
         buffer = qn.TrainData(*(saved[f"buffer_{f}"] for f in qn.TrainData._fields))
         results = RoundResults(*(saved[f] for f in RoundResults._fields))
         start_round = int(saved["next_round"])
@@ -537,8 +535,7 @@ def _gather(grasps, action):
 
 
 def _save(path, fingerprint, params, opt_state, buffer, results, next_round):
-    arrays = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(params))}
-    arrays.update({f"o{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(opt_state))})
+    arrays = artifacts.tree_arrays(params, "p") | artifacts.tree_arrays(opt_state, "o")
     arrays.update({f"buffer_{f}": np.asarray(getattr(buffer, f)) for f in buffer._fields})
     arrays.update({f: np.asarray(getattr(results, f)) for f in results._fields})
     io.save_npz(path, fingerprint=np.asarray(fingerprint), next_round=np.asarray(next_round),
@@ -678,9 +675,8 @@ class AskTell:
     @staticmethod
     def save(state: AskTellState, path: str | Path) -> None:
         """Writes the state to ``path`` (.npz, atomically)."""
-        arrays = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(state.params))}
-        arrays.update({f"o{i}": np.asarray(x)
-                       for i, x in enumerate(jax.tree.leaves(state.opt_state))})
+        arrays = (artifacts.tree_arrays(state.params, "p")
+                  | artifacts.tree_arrays(state.opt_state, "o"))
         arrays.update({f"buffer_{f}": np.asarray(getattr(state.buffer, f))
                        for f in qn.TrainData._fields})
         if state.pending is not None:
@@ -693,13 +689,8 @@ class AskTell:
         """Reads a state written by :meth:`save` (for this learner's network)."""
         saved = io.load_npz(path)
         template = self.init()
-        params = jax.tree.unflatten(
-            jax.tree.structure(template.params),
-            [jnp.asarray(saved[f"p{i}"]) for i in range(len(jax.tree.leaves(template.params)))])
-        opt_state = jax.tree.unflatten(
-            jax.tree.structure(template.opt_state),
-            [jnp.asarray(saved[f"o{i}"])
-             for i in range(len(jax.tree.leaves(template.opt_state)))])
+        params = artifacts.tree_from_arrays(saved, template.params, "p")
+        opt_state = artifacts.tree_from_arrays(saved, template.opt_state, "o")
         buffer = qn.TrainData(*(saved[f"buffer_{f}"] for f in qn.TrainData._fields))
         pending = None
         if "pending_slot" in saved:

@@ -25,7 +25,6 @@ from pathlib import Path
 from typing import Callable
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import optax
 
@@ -75,6 +74,9 @@ class PretrainConfig:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.loss not in qn.LOSSES:
             raise ValueError(f"loss must be one of {sorted(qn.LOSSES)}, got {self.loss!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
+                or not 0 <= self.seed < 2**31:
+            raise ValueError(f"seed must be an integer in [0, 2**31), got {self.seed!r}")
         if self.core_method not in ("sample", "greedy"):
             raise ValueError(f"core_method must be sample or greedy, got {self.core_method!r}")
 
@@ -167,8 +169,10 @@ def classification_metrics(prob: np.ndarray, label: np.ndarray,
     }
 
 
-def _predict(network, params, image, depth, chunk: int = 4096) -> np.ndarray:
-    fn = _predict_fn(network)
+def _predict(network, params, image, depth, chunk: int = 4096, what: str = "apply"):
+    """``network.apply`` (or ``what``, e.g. ``"features"``) over rows in fixed-size chunks,
+    the last one zero-padded, so every call reuses one compile."""
+    fn = _predict_fn(network, what)
     out = []
     for lo in range(0, len(image), chunk):
         hi = min(lo + chunk, len(image))
@@ -190,15 +194,7 @@ def _predict_fn(network, what: str = "apply"):
 
 
 def _features(network, params, image, depth, chunk: int = 4096) -> np.ndarray:
-    fn = _predict_fn(network, "features")
-    out = []
-    for lo in range(0, len(image), chunk):
-        hi = min(lo + chunk, len(image))
-        pad = chunk - (hi - lo)
-        im = np.concatenate([image[lo:hi], np.zeros((pad,) + image.shape[1:], image.dtype)])
-        de = np.concatenate([depth[lo:hi], np.zeros(pad, depth.dtype)])
-        out.append(np.asarray(fn(params, im, de))[: hi - lo])
-    return np.concatenate(out)
+    return _predict(network, params, image, depth, chunk, what="features")
 
 
 def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backend,
@@ -325,11 +321,8 @@ def pretrain(
     history, start_epoch = [], 0
     if ckpt.exists():
         saved = io.load_npz(ckpt)
-        leaves = [saved[f"p{i}"] for i in range(len(jax.tree.leaves(params)))]
-        params = jax.tree.unflatten(jax.tree.structure(params), [jnp.asarray(x) for x in leaves])
-        oleaves = [saved[f"o{i}"] for i in range(len(jax.tree.leaves(opt_state)))]
-        opt_state = jax.tree.unflatten(jax.tree.structure(opt_state),
-                                       [jnp.asarray(x) for x in oleaves])
+        params = artifacts.tree_from_arrays(saved, params, "p")
+        opt_state = artifacts.tree_from_arrays(saved, opt_state, "o")
         history = json.loads(str(saved["history"]))
         start_epoch = int(saved["epoch"])
         log(f"resuming at epoch {start_epoch}")
@@ -360,9 +353,8 @@ def pretrain(
                         "seconds": time.perf_counter() - t})
         log(f"epoch {epoch + 1}: train loss {train_loss:.4f}, validation accuracy "
             f"{vm['accuracy']:.3f}, AUC {vm['roc_auc']:.3f} ({time.perf_counter() - t:.0f} s)")
-        arrays_ckpt = {f"p{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(params))}
-        arrays_ckpt.update({f"o{i}": np.asarray(x)
-                            for i, x in enumerate(jax.tree.leaves(opt_state))})
+        arrays_ckpt = (artifacts.tree_arrays(params, "p")
+                       | artifacts.tree_arrays(opt_state, "o"))
         io.save_npz(ckpt, fingerprint=np.asarray(fingerprint), epoch=np.asarray(epoch + 1),
                     history=np.asarray(json.dumps(history)), **arrays_ckpt)
     io.save_json(out_dir / "history.json", history)
@@ -379,9 +371,7 @@ def pretrain(
 
     t = time.perf_counter()
     feats = _features(network, params, image, depth)
-    k = config.core_k
-    if k > len(feats):
-        raise ValueError(f"core set k = {k} exceeds D0's {len(feats)} grasps")
+    k = config.core_k  # <= len(feats): checked before training
     key_core = jax.random.fold_in(key, 2)
     with jax.enable_x64():
         dpp_idx = np.asarray(dpp.select_core_set(key_core, feats, k, method=config.core_method))

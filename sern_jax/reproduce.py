@@ -93,12 +93,13 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
 
     # 3. grasp learning (Table I)
     t = time.perf_counter()
-    learn_args = argparse.Namespace(
-        objects=hard["objects"], mesh=[], policies="sern,egreedy,greedy",
-        seeds=size["seeds"], rounds=size["rounds"], explore=20, evaluate=5, alpha=0.05,
-        epsilon=0.1, alpha0=1.0, p=0.3, eval_poses=4, eval_trials=8, fit_steps=40,
-        core_set="dpp", loss="bce", theta0=None, seed=0, out=str(out / "learn"),
-        json_out=None, no_figures=False, no_progress=args.no_progress)
+    # `sern grasp learn`'s own parser, so every other flag keeps its documented default
+    learn_parser = argparse.ArgumentParser(add_help=False)
+    learn_cli.add_learn_parser(learn_parser.add_subparsers())
+    learn_args = learn_parser.parse_args(
+        ["learn", *hard["objects"], "--seeds", str(size["seeds"]), "--rounds",
+         str(size["rounds"]), "--out", str(out / "learn")]
+        + (["--no-progress"] if args.no_progress else []))
     learn_cli.run_learn(learn_args, make_figures=learn_figures, log=lambda *_: None)
     timings["learn_s"] = time.perf_counter() - t
     table = json.loads((out / "learn" / "table.json").read_text())["table"]

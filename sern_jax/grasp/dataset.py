@@ -19,9 +19,10 @@ Layout of a dataset directory::
     summary.json         counts and class balance, written when every shard exists
 
 Randomness: object i is ``objects.sample_population(seed, ...)[i]``; its contexts use
-``fold_in(fold_in(key(seed), CONTEXT_STREAM), i)`` and its trials
-``fold_in(fold_in(key(seed), TRIAL_STREAM), i)``, so a shard's content does not depend on how
-many shards ran before it or on an interrupt.
+``fold_in(fold_in(key(seed), i), CONTEXT_STREAM)`` and its trials
+``fold_in(fold_in(key(seed), i), TRIAL_STREAM)`` (:func:`label_contexts` on
+``fold_in(key(seed), i)``), so a shard's content does not depend on how many shards ran
+before it or on an interrupt.
 """
 
 from __future__ import annotations

@@ -59,6 +59,25 @@ def _check_out(path: str | None, what: str = "--out") -> None:
             d.rmdir()
 
 
+def _check_file_out(path: str | None, what: str = "--json-out") -> None:
+    """Refuses an output file that could not be written, before any work (writes nothing)."""
+    if not path:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{what} {path} is a directory; name a file")
+    probe = p.parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK):
+        raise ValueError(f"{what} {path}: cannot write there")
+
+
+def _check_seed(seed: int) -> None:
+    if not 0 <= seed < 2**31:
+        raise ValueError(f"--seed must be in [0, 2**31), got {seed}")
+
+
 # ----------------------------------------------------------------------------- dataset
 
 
@@ -135,6 +154,7 @@ def add_pretrain_parser(subparsers) -> argparse.ArgumentParser:
 
 def _run_pretrain(args) -> int:
     _check_out(args.out)
+    _check_seed(args.seed)
     if not (args.lr > 0):
         raise ValueError(f"--lr must be > 0, got {args.lr}")
     if not Path(args.data, "config.json").exists():
@@ -219,6 +239,8 @@ def _run_screen(args) -> int:
     from sern_jax import io
     from sern_jax.grasp import artifacts, objects, pretrain
 
+    _check_seed(args.seed)
+    _check_file_out(args.json_out)
     theta0 = artifacts.load_theta0(args.theta0)
     specs = _specs(args.objects, args.mesh, objects.object_names(),
                    getattr(args, "mesh_units", "auto"))
@@ -307,8 +329,7 @@ def format_table(rows: list[dict]) -> str:
 
 def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     _check_out(args.out)
-    if args.json_out and Path(args.json_out).is_dir():
-        raise ValueError(f"--json-out {args.json_out} is a directory")
+    _check_file_out(args.json_out)
     from sern_jax.grasp import online
 
     policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())

@@ -74,7 +74,9 @@ def main(argv=None) -> int:
     all_err = []
     for o, name in enumerate(names):
         spec = objects.resolve_object(name)
-        params = env.make_params(jax.random.fold_in(root, o), spec, args.contexts, args.trials)
+        # separate streams: 0 = tabulated contexts, 1 = labelled pool, 2 = fine-tuning keys
+        params = env.make_params(jax.random.fold_in(jax.random.fold_in(root, 0), o), spec,
+                                 args.contexts, args.trials)
         prob, valid = np.asarray(params.success_prob), np.asarray(params.valid)
         d2 = []
         for c in range(len(prob)):
@@ -82,7 +84,8 @@ def main(argv=None) -> int:
             if len(v) >= 2:
                 d2.append(float(v[0] - v[1]))
         # labelled pool: fresh poses, one trial per valid candidate
-        lc = dataset.label_contexts(jax.random.fold_in(root, 1000 + o), spec, 6, 1)
+        lc = dataset.label_contexts(jax.random.fold_in(jax.random.fold_in(root, 1), o), spec,
+                                    6, 1)
         arrays = {f: getattr(lc, f) for f in ("depth", "center_px", "angle_px",
                                                "grasp_depth", "valid")}
         image, depth, ctx, slot = pretrain.crops_of(arrays)
@@ -95,13 +98,14 @@ def main(argv=None) -> int:
                     p = np.asarray(predict(theta0.params, params.image, params.depth))
                     errs[i, s] = np.abs(p[valid] - target).mean()
                     continue
-                rng = np.random.default_rng(1000 * o + 10 * s + i)
-                pick = rng.choice(len(label), size=min(n, len(label)), replace=False)
+                # nested subsets: seed s's first n grasps of one permutation
+                order = np.random.default_rng([o, s]).permutation(len(label))
+                pick = order[:min(n, len(label))]
                 w = np.zeros(len(label), np.float32)
                 w[pick] = 1.0
                 data = qn.TrainData(image, depth, label, w)
-                tuned = tune_seeds(jax.random.split(jax.random.fold_in(root, 7 + s), 1),
-                                   data)
+                key_fit = jax.random.fold_in(jax.random.fold_in(root, 2), s)
+                tuned = tune_seeds(key_fit[None], data)
                 p1 = jax.tree.map(lambda x: x[0], tuned)
                 p = np.asarray(predict(p1, params.image, params.depth))
                 errs[i, s] = np.abs(p[valid] - target).mean()

@@ -56,11 +56,11 @@ def add_learn_parser(subparsers) -> None:
 
 def add_reproduce_parser(subparsers) -> None:
     """``sern reproduce``: the check runner, the regret experiment and the figure makers are
-    handed to :mod:`sern_jax.reproduce` from the script folders here."""
+    handed to :mod:`sern_jax.grasp.reproduce` from the script folders here."""
     from experiments import regret
     from figures import make_learn_figs, make_regret_figs
     from proofs_check import cli as check_cli
-    from sern_jax import reproduce
+    from sern_jax.grasp import reproduce
 
     reproduce.add_parser(subparsers, check_run=check_cli.run,
                          regret_defaults=regret.RegretExperiment(),

@@ -638,7 +638,9 @@ class AskTell:
                                            u[None], self.alpha, jnp.float32(self.config.epsilon))
         slot = int(action[0, 0])
         if slot < 0:
-            return None, state
+            # No valid candidate: this grasp slot passes with nothing stored, exactly as in
+            # the batched run (weight 0), so the two stay in step.
+            return None, self._advance(state._replace(pending=None), None, 0.0)
         pending = (slot, np.asarray(crops.image[0, slot]), float(crops.depth[0, slot]))
         return np.asarray(cands.grasps[slot]), state._replace(pending=pending)
 
@@ -648,12 +650,18 @@ class AskTell:
             raise ValueError("tell() without a pending ask()")
         if reward not in (0, 1, 0.0, 1.0, True, False):
             raise ValueError(f"reward must be 0 or 1, got {reward!r}")
-        slot, image, depth = state.pending
+        return self._advance(state._replace(pending=None), state.pending, float(reward))
+
+    def _advance(self, state: AskTellState, stored, reward: float) -> AskTellState:
+        """Stores (crop, reward) in this grasp's row (nothing when ``stored`` is None), moves
+        to the next grasp, and updates θ on D ∪ C after the round's last one."""
         row = (state.round_index - 1) * self.config.explore + state.grasp_index
         buf = qn.TrainData(*(np.array(a) for a in state.buffer))
-        buf.image[row], buf.depth[row] = image, depth
-        buf.label[row], buf.weight[row] = float(reward), 1.0
-        state = state._replace(buffer=buf, pending=None, grasp_index=state.grasp_index + 1)
+        if stored is not None:
+            _, image, depth = stored
+            buf.image[row], buf.depth[row] = image, depth
+            buf.label[row], buf.weight[row] = reward, 1.0
+        state = state._replace(buffer=buf, grasp_index=state.grasp_index + 1)
         if state.grasp_index == self.config.explore:
             key = _stream(self.key_os, FIT, state.round_index)
             params, opt_state, _ = self._fit(key, state.params, state.opt_state, buf, self.core)
@@ -672,9 +680,15 @@ class AskTell:
         slot = int(action[0, 0])
         return None if slot < 0 else np.asarray(cands.grasps[slot])
 
-    @staticmethod
-    def save(state: AskTellState, path: str | Path) -> None:
-        """Writes the state to ``path`` (.npz, atomically)."""
+    def identity(self) -> str:
+        """What a saved state belongs to: config, policy, object/seed keys and θ0."""
+        text = "|".join([self.config.fingerprint(), self.policy,
+                         str(jax.random.key_data(self.key_os).tolist()),
+                         self.theta0.fingerprint])
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def save(self, state: AskTellState, path: str | Path) -> None:
+        """Writes the state to ``path`` (.npz, atomically), tagged with :meth:`identity`."""
         arrays = (artifacts.tree_arrays(state.params, "p")
                   | artifacts.tree_arrays(state.opt_state, "o"))
         arrays.update({f"buffer_{f}": np.asarray(getattr(state.buffer, f))
@@ -683,11 +697,16 @@ class AskTell:
             arrays.update(pending_slot=np.asarray(state.pending[0]),
                           pending_image=state.pending[1], pending_depth=np.asarray(state.pending[2]))
         io.save_npz(path, round_index=np.asarray(state.round_index),
-                    grasp_index=np.asarray(state.grasp_index), **arrays)
+                    grasp_index=np.asarray(state.grasp_index),
+                    identity=np.asarray(self.identity()), **arrays)
 
     def load(self, path: str | Path) -> AskTellState:
         """Reads a state written by :meth:`save` (for this learner's network)."""
         saved = io.load_npz(path)
+        if str(saved.get("identity", "")) != self.identity():
+            raise ValueError(f"{path} was saved by a learner with another config, policy, "
+                             "object, seed or θ0; make the learner with the settings it was "
+                             "saved with")
         template = self.init()
         params = artifacts.tree_from_arrays(saved, template.params, "p")
         opt_state = artifacts.tree_from_arrays(saved, template.opt_state, "o")

@@ -1,5 +1,5 @@
 """Tests for sern_jax.grasp.learn_cli (Table I rows and formatting, the learn outputs) and
-sern_jax.reproduce (its summary helpers, and an early clear error without θ0)."""
+sern_jax.grasp.reproduce (its summary helpers, and an early clear error without θ0)."""
 
 import argparse
 import json
@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import io, reproduce
+from sern_jax import io
+from sern_jax.grasp import reproduce
 from sern_jax.grasp import artifacts, learn_cli, online
 
 

@@ -112,6 +112,21 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
     return 0 if check_status == 0 else 1
 
 
+def _demote(markdown: str) -> str:
+    """A sub-report's headings two levels down, to nest it under this report's sections."""
+    return "\n".join("##" + line if line.startswith("#") else line
+                     for line in markdown.splitlines())
+
+
+def _checks(check_doc: dict) -> list[dict]:
+    """The per-check rows of ``sern check``'s report.json; refuses a report without any."""
+    rows = check_doc.get("checks")
+    if not rows:
+        raise ValueError("the theory checks' report.json lists no checks; rerun "
+                         "`sern check --quick` to see what went wrong")
+    return rows
+
+
 def _rel(path: Path, root: Path) -> str:
     return str(Path(path).resolve().relative_to(root.resolve()))
 
@@ -132,7 +147,7 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
             quick) -> str:
     from sern_jax.grasp import learn_cli
 
-    results = check_doc.get("results", [])
+    results = _checks(check_doc)
     ok = sum(1 for r in results if r.get("ok"))
     lines = [
         f"# sern reproduce{' --quick' if quick else ''}", "",
@@ -143,7 +158,7 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
         f"{ok}/{len(results)} verdicts as expected (exit status {check_status}). "
         f"Full table: [check/report.md](check/report.md).", "",
         "## 2. Regret curves (`sern regret` defaults)", "",
-        (Path(regret_dir) / "report.md").read_text(), "",
+        _demote((Path(regret_dir) / "report.md").read_text()), "",
     ]
     lines += [f"![{Path(f).stem}]({_rel(f, out)})" for f in regret_figs]
     rule = ", ".join(f"{o} ({'meets the rule' if m else 'does not meet the rule'})"
@@ -164,7 +179,7 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
 
 
 def _summary(check_doc, check_status, regret_dir, table, timings, out) -> str:
-    results = check_doc.get("results", [])
+    results = _checks(check_doc)
     ok = sum(1 for r in results if r.get("ok"))
     summary = json.loads((Path(regret_dir) / "summary.json").read_text())
     lines = ["", "=" * 72, "sern reproduce: summary", "=" * 72,

@@ -120,3 +120,20 @@ def test_reproduce_without_theta0_fails_before_any_work(tmp_path, monkeypatch):
                       run_regret=unreachable, regret_figures=unreachable,
                       learn_figures=unreachable)
     assert not (tmp_path / "run").exists()
+
+
+def test_reproduce_counts_the_checks_of_a_real_report(tmp_path):
+    # The layout `sern check` writes (proofs_check.report.build_json): a "checks" list.
+    doc = {"checks": [{"name": "a", "ok": True}, {"name": "b", "ok": False}],
+           "all_as_expected": False}
+    assert [r["name"] for r in reproduce._checks(doc)] == ["a", "b"]
+    with pytest.raises(ValueError, match="no checks"):
+        reproduce._checks({"results": [{"ok": True}]})
+    regret = tmp_path / "regret"
+    regret.mkdir()
+    (regret / "summary.json").write_text(json.dumps({"policies": {"softmax": {
+        "regret_T_mean": 1.0}}}))
+    table = [{"object": "o", "policy": "sern", "rounds": [50.0]},
+             {"object": "o", "policy": "greedy", "rounds": [40.0]}]
+    text = reproduce._summary(doc, 1, regret, table, {"check_s": 1.0}, tmp_path)
+    assert "1/2 verdicts as expected" in text and "NOT ALL AS EXPECTED" in text

@@ -161,17 +161,6 @@ def _estimate(exp: RegretExperiment, triples) -> dict:
             "seconds": seed_rounds_s}
 
 
-def _available_memory() -> int:
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
 def _fmt_bytes(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
@@ -193,7 +182,9 @@ def _fmt_time(s: float) -> str:
 def check_fits(exp: RegretExperiment, triples, out_dir: Path) -> dict:
     """Refuses (``ValueError``, naming the estimate and the limit) runs that cannot fit."""
     est = _estimate(exp, triples)
-    avail = _available_memory()
+    from sern_jax import executor
+
+    avail = executor.available_memory_bytes()
     if est["memory_bytes"] > avail:
         raise ValueError(
             f"--seeds {exp.num_seeds} x {len(triples)} policies needs about "

@@ -25,9 +25,9 @@ __all__ = ["add_parser", "run", "LEARN_FULL", "LEARN_QUICK"]
 
 LEARN_FULL = {"objects": 6, "seeds": 5, "rounds": 5}
 LEARN_QUICK = {"objects": 3, "seeds": 3, "rounds": 3}
-# Expected wall times on the project's 2-core machine, shared with other jobs (measured,
-# see README), for the estimate printed before a run starts.
-EXPECTED_S = {"check": 90, "regret": 30, "learn_full": 1000, "learn_quick": 240}
+# Expected wall times on the project's idle 2-core machine (measured, see README), for the
+# estimate printed before a run starts.
+EXPECTED_S = {"check": 120, "regret": 50, "learn_full": 420, "learn_quick": 180}
 
 
 def add_parser(subparsers, *, check_run: Callable, regret_defaults, run_regret: Callable,

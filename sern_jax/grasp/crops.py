@@ -99,6 +99,14 @@ def _unpack(candidates):
     )
 
 
+def _unpack_checked(depth, candidates, config, batch: bool):
+    """``_unpack`` plus the trace-time shape check of ``extract`` / ``extract_batch``."""
+    center, angle, gdepth = _unpack(candidates)
+    _check_shapes(jnp.shape(depth), jnp.shape(center), jnp.shape(angle), jnp.shape(gdepth),
+                  config, batch=batch)
+    return center, angle, gdepth
+
+
 def _check_shapes(depth_shape, center_shape, angle_shape, gdepth_shape, config, batch):
     lead = 1 if batch else 0
     what = "[B, H, W]" if batch else "[H, W]"
@@ -223,15 +231,7 @@ def extract(depth, candidates, config: CropConfig = CropConfig()) -> Crops:
       Crops(image [K, S, S] = bilinear depth - grasp_depth with the jaw axis horizontal,
       depth [K] = grasp_depth), float32.
     """
-    center, angle, gdepth = _unpack(candidates)
-    _check_shapes(
-        jnp.shape(depth),
-        jnp.shape(center),
-        jnp.shape(angle),
-        jnp.shape(gdepth),
-        config,
-        batch=False,
-    )
+    center, angle, gdepth = _unpack_checked(depth, candidates, config, batch=False)
     depth = jnp.asarray(depth, jnp.float32)
     center = jnp.asarray(center, jnp.float32)
     angle = jnp.asarray(angle, jnp.float32)
@@ -253,15 +253,7 @@ def extract_batch(depth, candidates, config: CropConfig = CropConfig()) -> Crops
     Returns:
       Crops(image [B, K, S, S], depth [B, K]).
     """
-    center, angle, gdepth = _unpack(candidates)
-    _check_shapes(
-        jnp.shape(depth),
-        jnp.shape(center),
-        jnp.shape(angle),
-        jnp.shape(gdepth),
-        config,
-        batch=True,
-    )
+    center, angle, gdepth = _unpack_checked(depth, candidates, config, batch=True)
     return jax.vmap(lambda d, c, a, g: extract(d, (c, a, g), config))(
         depth, center, angle, gdepth
     )

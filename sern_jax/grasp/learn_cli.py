@@ -375,6 +375,7 @@ def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
                                        "theta0": theta0.fingerprint,
                                        "fingerprint": res["fingerprint"]})
     io.save_json(out / "metadata.json", io.run_metadata(timings=res["timings"],
+                                                         trial_counts=res["trial_counts"],
                                                          seconds=seconds))
     io.save_npz(out / "results.npz", **res["results"]._asdict())
     io.save_json(out / "table.json", {"table": res["table"], "seconds": seconds})
@@ -383,6 +384,10 @@ def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
     t = res["timings"]
     total = sum(t.values()) or 1.0
     split = ", ".join(f"{k} {v:.0f} s ({100 * v / total:.0f}%)" for k, v in t.items())
+    n = res["trial_counts"]
+    shared = (f" Trials: {n['simulated']:,} simulated for {n['requested']:,} policy "
+              "grasps (policies that pick the same grasp on the same pose share its "
+              "trial: common random numbers)." if n["requested"] else "")
     io.save_text(out / "report.md",
                  f"# Online grasp learning\n\n{table}\n\nWall time {seconds:.0f} s; where it "
-                 f"went: {split}.\n")
+                 f"went: {split}.{shared}\n")

@@ -135,6 +135,76 @@ def test_common_random_numbers(run_a):
         np.testing.assert_array_equal(b[:, :, q["egreedy"]], b[:, :, q["greedy"]])
 
 
+class _HashSimulator:
+    """A stand-in simulator whose outcome is a fixed function of (grasp, noise, pose), so
+    the test sees any mix-up of rows, noise draws or poses."""
+
+    def __init__(self):
+        from sern_jax.grasp import sim as sim_lib
+
+        self.config, self.sim_lib, self.rows = sim_lib.TrialConfig(), sim_lib, 0
+
+    def run_trials(self, grasps, noise, object_pose):
+        self.rows += len(grasps)
+        h = (grasps @ [3.1, 5.3, 7.7, 0.9] + noise.friction * 11.0 + noise.mass_scale * 2.3
+             + noise.grasp_error @ [13.0, 17.0, 19.0, 2.9] + object_pose @ np.arange(1, 8))
+        success = np.modf(np.abs(h) * 1e3)[0] > 0.5
+        z = np.zeros(len(grasps))
+        return self.sim_lib.TrialResult(success, z > 1, z, z, "hash")
+
+
+def test_shared_trials_equal_simulating_every_copy(spec):
+    """_run_trials simulates each distinct (seed, trial, grasp) once: the outcomes equal
+    those of simulating every policy's copy with its (shared) noise."""
+    from sern_jax.grasp import sim as sim_lib
+
+    rng = np.random.default_rng(0)
+    num_s, num_q, num_n = 2, 3, 4
+    candidates = rng.normal(size=(num_n, 3, 4))  # 3 candidate grasps per pose
+    # q0 and q1 agree everywhere; q2 agrees on poses 0 and 2 only; seed 1 shifts choices.
+    choice = np.zeros((num_s, num_q, num_n), int)
+    choice[:, 2, 1::2] = 1
+    choice[1] = (choice[1] + 1) % 3
+    grasps = np.stack([[[candidates[n, choice[s, q, n]] for n in range(num_n)]
+                        for q in range(num_q)] for s in range(num_s)])[None]
+    poses = rng.normal(size=(1, num_s, num_n, 7))
+    keys = [[jax.random.key(100 + s) for s in range(num_s)]]
+    simulator, counts = _HashSimulator(), {}
+    got = online._run_trials([simulator], grasps, poses, keys, num_n, counts)
+    assert counts == {"requested": num_s * num_q * num_n, "simulated": num_s * 6}
+    assert simulator.rows == num_s * 6
+    want = np.zeros_like(got)
+    for s in range(num_s):
+        noise = sim_lib.sample_noise(keys[0][s], num_n, simulator.config)
+        for q in range(num_q):
+            want[0, s, q] = simulator.run_trials(
+                grasps[0, s, q], sim_lib.TrialNoise(*(np.asarray(a) for a in noise)),
+                poses[0, s]).success
+    assert 0 < want.mean() < 1  # the stand-in gives both outcomes: the check has teeth
+    np.testing.assert_array_equal(got, want)
+
+
+def test_native_trial_does_not_depend_on_its_batch(spec):
+    """What makes sharing trials exact: a native trial's outcome is the same whatever else
+    runs in its batch and in whatever order (MuJoCo is deterministic)."""
+    from sern_jax.grasp import sim as sim_lib
+
+    ctx = context.make_contexts(jax.random.key(11), spec, 2)
+    simulator = sim_lib.GraspSimulator(ctx.model, chunk=16)
+    pi, ki = np.nonzero(np.asarray(ctx.candidates.valid))
+    pi, ki = pi[:48], ki[:48]
+    grasps = np.asarray(ctx.candidates.grasps, np.float64)[pi, ki]
+    poses = np.asarray(ctx.poses)[pi]
+    noise = sim_lib.TrialNoise(*(np.asarray(a) for a in sim_lib.sample_noise(
+        jax.random.key(4), len(pi), simulator.config)))
+    full = simulator.run_trials(grasps, noise, object_pose=poses)
+    perm = np.random.default_rng(1).permutation(len(pi))[:20]
+    part = simulator.run_trials(grasps[perm], sim_lib.TrialNoise(*(a[perm] for a in noise)),
+                                object_pose=poses[perm])
+    np.testing.assert_array_equal(part.rise, full.rise[perm])
+    np.testing.assert_array_equal(part.success, full.success[perm])
+
+
 def test_learner_told_only_failures_lowers_its_scores(tiny_theta0, spec, tmp_path,
                                                       monkeypatch):
     """Every trial fails: after the run, the learner scores the grasps it tried lower than

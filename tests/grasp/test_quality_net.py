@@ -273,3 +273,32 @@ def test_fit_normalizer_and_benchmark_keys():
         qn.fit_normalizer(np.full((2, _S, _S), np.nan), np.ones(2))
     with pytest.raises(ValueError, match="conv_kernels"):
         qn.QualityNetConfig(conv_kernels=(3,))
+
+
+@pytest.mark.parametrize("height,kernel,stride,cin", [
+    (8, 3, 1, 8), (8, 3, 2, 8), (7, 3, 2, 3), (9, 4, 3, 2), (5, 5, 1, 1), (6, 2, 4, 2)])
+def test_im2col_conv_equals_xla_same_conv(height, kernel, stride, cin):
+    x = jax.random.normal(jax.random.key(height * 7 + kernel), (3, height, height + 1, cin))
+    k = jax.random.normal(jax.random.key(stride), (kernel, kernel, cin, 5))
+    want = jax.lax.conv_general_dilated(
+        x, k, (stride, stride), "SAME", dimension_numbers=("NHWC", "HWIO", "NHWC"))
+    got = qn._same_conv_im2col(x, k, stride)
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+    # Control: a transposed kernel is a different convolution, and the check sees it.
+    assert float(jnp.abs(qn._same_conv_im2col(x, k.transpose(1, 0, 2, 3), stride)
+                         - want).max()) > 1e-2
+
+
+def test_conv_impls_give_the_same_network(setup):
+    net, _, _, data, norm, _ = setup
+    other = qn.make_quality_network(_CONFIG, conv="im2col")
+    params = net.init(jax.random.key(3), norm)
+    want = net.apply(params, data.image[:64], data.depth[:64])
+    got = other.apply(params, data.image[:64], data.depth[:64])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(other.features(params, data.image[:8], data.depth[:8]),
+                               net.features(params, data.image[:8], data.depth[:8]),
+                               rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="conv must be one of"):
+        qn.make_quality_network(_CONFIG, conv="fft")

@@ -12,7 +12,8 @@ across the ablation's variants, which share keys).
     python -m experiments.grasp_learning loss             # BCE vs the printed L1 (control)
     python -m experiments.grasp_learning schedule         # constant alpha vs alpha0/ln(T^p)
 
-Options: --objects N (first N of the hard set), --seeds S, --rounds R, --out DIR.
+Options: --objects N (first N of the hard set), --seeds S, --rounds R, --out DIR,
+--backend native|mjx (trial physics; mjx for a GPU).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import time
 from pathlib import Path
 
 SETTINGS = ("paper", "strong", "alpha", "core_set", "loss", "schedule")
@@ -62,6 +64,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--out", default=None)
+    parser.add_argument("--backend", choices=("native", "mjx"), default="native",
+                        help="trial physics: native MuJoCo (CPU) or MJX (GPU)")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     if args.objects < 1:
@@ -75,18 +79,25 @@ def main(argv=None) -> int:
     theta0 = artifacts.load_theta0()
     hard = artifacts.hard_set(theta0, args.objects)
     specs = [objects.make_object(n) for n in hard["objects"]]
-    base = online.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds)
+    base = online.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds,
+                               backend=args.backend)
     out = Path(args.out or f"runs/grasp_{args.setting}")
     summary = {"setting": args.setting, "objects": hard["objects"],
                "meets_rule": hard["meets_rule"], "runs": {}}
     finals = {}
     for label, config in runs_of(args.setting, base):
+        t = time.perf_counter()
         res = online.run(config, specs, out / label.replace("=", "_"), theta0=theta0,
                          progress=not args.no_progress)
+        seconds = time.perf_counter() - t
+        io.save_npz(out / label.replace("=", "_") / "results.npz",
+                    **res["results"]._asdict())
         lv = res["results"].lowvar_eval if config.eval_poses else res["results"].paper_eval
         for q, pol in enumerate(config.policies):
             finals[(label, pol)] = lv[-1, :, q, :]  # [O, S]
-        summary["runs"][label] = {"table": res["table"], "timings": res["timings"]}
+        summary["runs"][label] = {"table": res["table"], "timings": res["timings"],
+                                  "trial_counts": res["trial_counts"], "seconds": seconds,
+                                  "config": dataclasses.asdict(config)}
     # paired comparisons of every (label, policy) against the first one, per object and pooled
     keys = list(finals)
     ref = keys[0]
@@ -99,6 +110,7 @@ def main(argv=None) -> int:
         comps.append(row)
     summary["paired_final_round"] = comps
     summary["metric"] = "final-round greedy success (low-variance evaluation where run)"
+    summary["metadata"] = io.run_metadata()
     io.save_json(out / "summary.json", summary)
     for c in comps:
         m, h = c["pooled"]

@@ -71,6 +71,7 @@ __all__ = [
 ]
 
 POLICIES = ("sern", "sern_log", "egreedy", "greedy")
+MJX_BATCH = 2048  # MJX trials per compiled call: one compile per object on a GPU
 CHECKPOINT_VERSION = 2  # bump when the checkpoint's contents change (2: explore_action)
 EXPLORE_CONTEXT, EXPLORE_TRIAL, POLICY_UNIFORM, FIT = 0, 1, 2, 3
 EVAL_CONTEXT, EVAL_TRIAL, EVAL_UNIFORM, LOWVAR_CONTEXT, LOWVAR_TRIAL = 4, 5, 6, 7, 8
@@ -403,7 +404,8 @@ def run(
     root = jax.random.key(config.seed)
     keys_os = [[object_key(root, n, s) for s in range(num_s)] for n in names]
     models = [context_lib.scene_model(spec) for spec in specs]
-    simulators = [sim_lib.GraspSimulator(m, backend=config.backend) for m in models]
+    simulators = [sim_lib.GraspSimulator(m, backend=config.backend, mjx_batch=MJX_BATCH)
+                  for m in models]
     alphas = jnp.asarray([config.policy_alpha(n) for n in config.policies], jnp.float32)
     epsilon = jnp.float32(config.epsilon)
     choose = _batched_choose(network, config.policies, crops_lib.CropConfig())

@@ -538,12 +538,14 @@ def _batched_execute(execute):
 
 
 class _MjxRunner:
-    """MJX backend: ``jit(vmap(make_execute(...)))`` over trials, batches padded to 2^k."""
+    """MJX backend: ``jit(vmap(make_execute(...)))`` over trials, batches padded to 2^k, or
+    run in chunks of exactly ``batch`` trials (the last one padded) when ``batch`` is set:
+    one compiled program per scene, whatever the batch sizes."""
 
-    def __init__(self, model, config):
+    def __init__(self, model, config, batch=None):
         from sern_jax.grasp._mjx import mjx
 
-        self.model, self.config = model, config
+        self.model, self.config, self.batch = model, config, batch
         self.ids = scene_lib.scene_ids(model)
         self.mx = mjx.put_model(model)
         self.program = _batched_execute(make_execute(config, model))
@@ -551,18 +553,29 @@ class _MjxRunner:
 
     def __call__(self, grasps, noise, object_pose):
         n = len(grasps)
+        if n == 0:
+            empty = np.zeros(0)
+            return TrialResult(empty.astype(bool), empty.astype(bool), empty, empty, "mjx")
         poses = np.tile(self.pose0, (n, 1)) if object_pose is None else object_pose
-        # Pad the batch to the next power of two (repeating trial 0, results dropped)
-        # so that varying numbers of valid candidates reuse a few compiled programs.
-        n_pad = 1 << max(n - 1, 0).bit_length()
+        # Pad the batch (repeating trial 0, results dropped) to the next power of two, or
+        # to whole chunks of `batch`, so that varying numbers of trials reuse a few (or
+        # one) compiled programs.
+        size = self.batch or 1 << max(n - 1, 0).bit_length()
+        n_pad = -(-max(n, 1) // size) * size
         pad = np.concatenate([np.arange(n), np.zeros(n_pad - n, np.int64)])
         f32 = functools.partial(jnp.asarray, dtype=jnp.float32)
-        params = TrialNoise(*(f32(a[pad]) for a in noise))
-        with jax.numpy_rank_promotion("allow"):
-            out = self.program(self.mx, f32(poses[pad]), f32(grasps[pad]), params)
-        nan = ~np.asarray(out.finite)[:n]
-        rise = np.where(nan, np.nan, np.asarray(out.rise, np.float64)[:n])
-        gap = np.asarray(out.gap, np.float64)[:n]
+        finite, rise, gap = [], [], []
+        for lo in range(0, n_pad, size):
+            idx = pad[lo:lo + size]
+            params = TrialNoise(*(f32(a[idx]) for a in noise))
+            with jax.numpy_rank_promotion("allow"):
+                out = self.program(self.mx, f32(poses[idx]), f32(grasps[idx]), params)
+            finite.append(np.asarray(out.finite))
+            rise.append(np.asarray(out.rise, np.float64))
+            gap.append(np.asarray(out.gap, np.float64))
+        nan = ~np.concatenate(finite)[:n]
+        rise = np.where(nan, np.nan, np.concatenate(rise)[:n])
+        gap = np.concatenate(gap)[:n]
         # Decided here in float64, as the native backend does (out.success is the same
         # rule in float32).
         success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
@@ -583,6 +596,8 @@ class GraspSimulator:
       config: trial schedule, success rule and randomisation ranges.
       num_threads: native threads (default: ``os.cpu_count()``).
       chunk: native trials per rollout call (memory: chunk x steps x state doubles).
+      mjx_batch: MJX trials per compiled call (None: each call padded to the next power
+        of two, one compile per size; an int: chunks of exactly this many, one compile).
     """
 
     def __init__(
@@ -592,6 +607,7 @@ class GraspSimulator:
         config: TrialConfig = TrialConfig(),
         num_threads: int | None = None,
         chunk: int = 256,
+        mjx_batch: int | None = None,
     ):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -609,7 +625,9 @@ class GraspSimulator:
                 )
             self._runner = _NativeRunner(model, config, threads, chunk)
         else:
-            self._runner = _MjxRunner(model, config)
+            if mjx_batch is not None and (isinstance(mjx_batch, bool) or mjx_batch < 1):
+                raise ValueError(f"mjx_batch must be an integer >= 1, got {mjx_batch!r}")
+            self._runner = _MjxRunner(model, config, mjx_batch)
 
     def run_trials(self, grasps, noise: TrialNoise, object_pose=None) -> TrialResult:
         """Runs N trials.

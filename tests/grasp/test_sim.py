@@ -118,6 +118,22 @@ def test_backends_agree_over_objects():
         assert stats["nan_native"] == 0 and stats["nan_mjx"] == 0, stats
 
 
+def test_mjx_fixed_batch_runs_chunks_of_one_program(box_model, mjx_sim, paired_trials):
+    """mjx_batch: 13 trials run as two chunks of MJX_BATCH (the last padded), the same
+    compiled program as ``mjx_sim``, with the results of running them alone."""
+    grasps, noise = paired_trials
+    MJX_BATCH = len(grasps)  # noqa: N806 (conftest's batch: the fixture's program)
+    base = mjx_sim.run_trials(grasps, noise)
+    fixed = sim.GraspSimulator(box_model, "mjx", mjx_batch=MJX_BATCH)
+    idx = np.concatenate([np.arange(MJX_BATCH), np.arange(5)])
+    res = fixed.run_trials(grasps[idx], sim.TrialNoise(*(a[idx] for a in noise)))
+    assert res.success.shape == (MJX_BATCH + 5,)
+    np.testing.assert_array_equal(res.success, base.success[idx])
+    np.testing.assert_allclose(res.rise, base.rise[idx], atol=1e-6)
+    with pytest.raises(ValueError, match="mjx_batch"):
+        sim.GraspSimulator(box_model, "mjx", mjx_batch=0)
+
+
 def test_mjx_pads_odd_batches_without_changing_results(mjx_sim, paired_trials):
     grasps, noise = paired_trials
     base = mjx_sim.run_trials(grasps, noise)

@@ -287,6 +287,11 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--eval-poses", type=int, default=4,
                    help="fixed poses of the low-variance evaluation (0 = off)")
     p.add_argument("--eval-trials", type=int, default=8)
+    p.add_argument("--regret-trials", type=int, default=0, metavar="M",
+                   help="regret accounting: simulate every valid candidate of every "
+                        "exploration pose M times (the oracle) and report each round's "
+                        "pseudo-regret per policy; costly (64 x M trials per exploration "
+                        "grasp, shared by the policies), 0 = off")
     p.add_argument("--fit-steps", type=_positive_int, default=40)
     p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp")
     p.add_argument("--loss", choices=("bce", "l1"), default="bce")
@@ -329,6 +334,18 @@ def format_table(rows: list[dict]) -> str:
             cells = [r["object"], r["policy"]] + [
                 f"{m:.0f}% (±{s:.1f})" for m, s in zip(r["lowvar_rounds"], r["lowvar_std"])]
             lines.append("| " + " | ".join(cells) + " |")
+    if "pseudo_regret" in rows[0]:
+        lines += ["", "Pseudo-regret per round (expected successes lost to the best candidate "
+                  "over the round's exploration grasps, oracle from --regret-trials trials per "
+                  "candidate; mean ± std over seeds):", ""]
+        head = ["Obj.", "Alg."] + [f"Round {i + 1}" for i in range(num_r)] + ["Total"]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in rows:
+            cells = [r["object"], r["policy"]] + [
+                f"{m:.2f} (±{s:.2f})" for m, s in zip(r["pseudo_regret"],
+                                                     r["pseudo_regret_std"])]
+            cells.append(f"{sum(r['pseudo_regret']):.2f}")
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -342,6 +359,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
         policies=policies, num_seeds=args.seeds, rounds=args.rounds, explore=args.explore,
         evaluate=args.evaluate, alpha=args.alpha, epsilon=args.epsilon, alpha0=args.alpha0,
         p=args.p, eval_poses=args.eval_poses, eval_trials=args.eval_trials,
+        regret_trials=args.regret_trials,
         fit_steps=args.fit_steps, core_set=args.core_set, loss=args.loss, seed=args.seed,
         backend=getattr(args, "backend", "native"))
     from sern_jax import io

@@ -72,9 +72,10 @@ __all__ = [
 
 POLICIES = ("sern", "sern_log", "egreedy", "greedy")
 MJX_BATCH = 2048  # MJX trials per compiled call: one compile per object on a GPU
-CHECKPOINT_VERSION = 2  # bump when the checkpoint's contents change (2: explore_action)
+CHECKPOINT_VERSION = 3  # bump when the checkpoint's contents change (3: pseudo_regret)
 EXPLORE_CONTEXT, EXPLORE_TRIAL, POLICY_UNIFORM, FIT = 0, 1, 2, 3
 EVAL_CONTEXT, EVAL_TRIAL, EVAL_UNIFORM, LOWVAR_CONTEXT, LOWVAR_TRIAL = 4, 5, 6, 7, 8
+ORACLE_TRIAL = 9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,6 +96,11 @@ class OnlineConfig:
       core_set: ``"dpp"`` (shipped), ``"random"`` (same size, uniform from D0's sample) or
         ``"none"``.
       eval_poses, eval_trials: the low-variance evaluation (0 poses = off).
+      regret_trials: M > 0 turns on regret accounting: every valid candidate of every
+        exploration context is simulated M times (the oracle r_a(s) ~ successes / M) and
+        each round's pseudo-regret sum_e [max_a r_a(s_e) - sum_a pi(a|s_e) r_a(s_e)] is
+        recorded per policy (costly: 64 x M trials per exploration grasp, shared by the
+        policies). 0 = off.
       seed: root seed.
       backend: physics backend for trials.
     """
@@ -115,6 +121,7 @@ class OnlineConfig:
     core_set: str = "dpp"
     eval_poses: int = 4
     eval_trials: int = 8
+    regret_trials: int = 0
     seed: int = 0
     backend: str = "native"
 
@@ -132,7 +139,7 @@ class OnlineConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
-        for name in ("eval_poses", "eval_trials"):
+        for name in ("eval_poses", "eval_trials", "regret_trials"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
@@ -288,10 +295,15 @@ class RoundResults(NamedTuple):
     lowvar_eval: np.ndarray  # mean greedy success probability over the fixed eval poses
     explore_success: np.ndarray  # fraction of exploration grasps that succeeded (round 0: NaN)
     explore_action: np.ndarray  # [R + 1, O, Q, S, E] chosen candidate slots (-1: none valid)
+    # Expected successes lost to the best candidate over the round's exploration grasps,
+    # under the policy's distribution and the oracle of `regret_trials` trials per
+    # candidate (NaN: round 0, or accounting off).
+    pseudo_regret: np.ndarray  # [R + 1, O, Q, S]
 
 
 def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.ndarray,
-               lowvar_eval: np.ndarray | None = None) -> list[dict]:
+               lowvar_eval: np.ndarray | None = None,
+               pseudo_regret: np.ndarray | None = None) -> list[dict]:
     """Table I rows: per object and policy, round 1..R success mean ± std over seeds (%),
     Max over rounds and Imprv = (r_R - r_1)/r_1 (the paper's definition)."""
     rows = []
@@ -313,6 +325,10 @@ def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.nda
                 lv = 100.0 * lowvar_eval[:, o, q, :]
                 row["lowvar_rounds"] = [float(v) for v in lv.mean(1)]
                 row["lowvar_std"] = [float(v) for v in lv.std(1)]
+            if pseudo_regret is not None and np.isfinite(pseudo_regret[1:]).all():
+                pr = pseudo_regret[1:, o, q, :]  # [R, S]
+                row["pseudo_regret"] = [float(v) for v in pr.mean(1)]
+                row["pseudo_regret_std"] = [float(v) for v in pr.std(1)]
             rows.append(row)
     return rows
 
@@ -426,8 +442,10 @@ def run(
     )
     shape = (num_r + 1, num_o, num_q, num_s)
     results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan),
-                           np.full(shape + (num_e,), -1, np.int32))
+                           np.full(shape + (num_e,), -1, np.int32), np.full(shape, np.nan))
     timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate")}
+    if config.regret_trials:
+        timings["oracle"] = 0.0
     trial_counts = {"requested": 0, "simulated": 0}  # this invocation (not resumed rounds)
     start_round = 0
 
@@ -514,7 +532,7 @@ def run(
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (num_e,))))(
             jnp.stack([jnp.stack([_stream(k, POLICY_UNIFORM, r) for k in row])
                        for row in keys_os])))
-        action, _, _, crops = choose(params, depth, cands, u, alphas, epsilon)
+        action, _, probs, crops = choose(params, depth, cands, u, alphas, epsilon)
         action = np.asarray(action)  # [O, S, Q, E]
         timings["choose"] += time.perf_counter() - t
         t = time.perf_counter()
@@ -526,6 +544,15 @@ def run(
         timings["trials"] += time.perf_counter() - t
         results.explore_success[r] = success.mean(-1).transpose(0, 2, 1)
         results.explore_action[r] = action.transpose(0, 2, 1, 3)
+        if config.regret_trials:
+            t = time.perf_counter()
+            oracle = _oracle(simulators, cands, poses, config.regret_trials,
+                             [[_stream(k, ORACLE_TRIAL, r) for k in row] for row in keys_os],
+                             trial_counts)  # [O, S, E, K]
+            expected = (np.asarray(probs, np.float64) * oracle[:, :, None]).sum(-1)
+            regret = oracle.max(-1)[:, :, None] - expected  # [O, S, Q, E]
+            results.pseudo_regret[r] = regret.sum(-1).transpose(0, 2, 1)
+            timings["oracle"] += time.perf_counter() - t
         # store (crop, reward) of each chosen grasp
         t = time.perf_counter()
         idx = np.maximum(action, 0)
@@ -548,10 +575,44 @@ def run(
         bar.update(1)
     bar.close()
     rows = table_rows(names, config.policies, results.paper_eval,
-                      results.lowvar_eval if config.eval_poses else None)
+                      results.lowvar_eval if config.eval_poses else None,
+                      results.pseudo_regret if config.regret_trials else None)
     return {"table": rows, "results": results, "timings": timings,
             "trial_counts": trial_counts, "objects": names,
             "fingerprint": fingerprint, "config": config}
+
+
+def _oracle(simulators, cands, poses, num_trials, noise_keys, counts):
+    """Success probabilities r_a(s) of every candidate of every context: [O, S, N, K].
+
+    cands: Candidates with leading [O, S, N]; poses [O, S, N, 7]. Trial j of context n of
+    (o, s) uses ``sample_noise(noise_keys[o][s], N * M)[n * M + j]`` for every candidate
+    (common random numbers across candidates, as ``success_probability``); invalid
+    candidates get 0.
+    """
+    valid = np.asarray(cands.valid, bool)
+    grasps = np.asarray(cands.grasps, np.float64)
+    num_o, num_s, num_n, num_k = valid.shape
+    m = num_trials
+    out = np.zeros(valid.shape)
+    for o, simulator in enumerate(simulators):
+        s_i, n_i, k_i = np.nonzero(valid[o])
+        if not len(s_i):
+            continue
+        noise = [sim_lib.sample_noise(noise_keys[o][s], num_n * m, simulator.config)
+                 for s in range(num_s)]
+        noise = sim_lib.TrialNoise(*(np.stack([np.asarray(nz[f]) for nz in noise])
+                                     for f in range(3)))  # [S, N * M, ...]
+        rows_s = np.repeat(s_i, m)
+        rows_t = (n_i[:, None] * m + np.arange(m)[None]).reshape(-1)
+        res = simulator.run_trials(
+            np.repeat(grasps[o][s_i, n_i, k_i], m, axis=0),
+            sim_lib.TrialNoise(*(a[rows_s, rows_t] for a in noise)),
+            object_pose=np.repeat(np.asarray(poses[o])[s_i, n_i], m, axis=0))
+        out[o][s_i, n_i, k_i] = res.success.reshape(-1, m).mean(1)
+        counts["requested"] += len(rows_s)
+        counts["simulated"] += len(rows_s)
+    return out
 
 
 def _gather(grasps, action):

@@ -67,17 +67,22 @@ def test_format_table_with_lowvar():
 def test_write_learn_outputs(tmp_path, tiny_theta0):
     config = online.OnlineConfig(policies=("sern", "greedy"), num_seeds=2, rounds=2)
     pe = _paper_eval()
-    results = online.RoundResults(pe, pe, pe, np.zeros(pe.shape + (3,), np.int32))
+    results = online.RoundResults(pe, pe, pe, np.zeros(pe.shape + (3,), np.int32), pe)
     table = online.table_rows(["box"], config.policies, pe, pe)
     res = {"table": table, "results": results, "objects": ["box"], "fingerprint": "f" * 16,
-           "config": config, "timings": {"contexts": 1.0, "choose": 3.0}}
+           "config": config, "timings": {"contexts": 1.0, "choose": 3.0},
+           "trial_counts": {"requested": 120, "simulated": 70}}
     learn_cli.write_learn_outputs(tmp_path, res, 4.0, tiny_theta0)
     assert (tmp_path / "table.md").read_text() == learn_cli.format_table(table) + "\n"
     assert json.loads((tmp_path / "table.json").read_text())["table"] == table
     cfg = io.load_json(tmp_path / "config.json")
     assert cfg["theta0"] == "test" and cfg["config"]["policies"] == ["sern", "greedy"]
     np.testing.assert_array_equal(io.load_npz(tmp_path / "results.npz")["paper_eval"], pe)
-    assert "choose 3 s (75%)" in (tmp_path / "report.md").read_text()
+    report = (tmp_path / "report.md").read_text()
+    assert "choose 3 s (75%)" in report
+    assert "70 simulated for 120 policy grasps" in report
+    assert io.load_json(tmp_path / "metadata.json")["trial_counts"] == {
+        "requested": 120, "simulated": 70}
 
 
 def test_check_out_refuses_a_file(tmp_path):

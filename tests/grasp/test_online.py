@@ -83,6 +83,9 @@ def test_tiny_run_table(run_a):
     assert int(saved["next_round"]) == CONFIG.rounds + 1
     assert str(saved["fingerprint"]) == res["fingerprint"]
     assert set(res["timings"]) == {"contexts", "choose", "trials", "update", "evaluate"}
+    # regret accounting is off by default: NaN, and no regret in the table
+    assert np.isnan(results.pseudo_regret).all()
+    assert all("pseudo_regret" not in r for r in table)
 
 
 def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_path):
@@ -203,6 +206,48 @@ def test_native_trial_does_not_depend_on_its_batch(spec):
                                 object_pose=poses[perm])
     np.testing.assert_array_equal(part.rise, full.rise[perm])
     np.testing.assert_array_equal(part.success, full.success[perm])
+
+
+def test_oracle_matches_success_probability(spec):
+    """_oracle's first context uses the noise of success_probability(key, ., M): the two
+    estimates agree exactly; invalid candidates get 0."""
+    from sern_jax.grasp import sim as sim_lib
+
+    ctx = context.make_contexts(jax.random.key(21), spec, 2)
+    simulator = sim_lib.GraspSimulator(ctx.model)
+    cands = jax.tree.map(lambda x: np.asarray(x)[None, None], ctx.candidates)
+    poses = np.asarray(ctx.poses)[None, None]
+    key = jax.random.key(5)
+    counts = {"requested": 0, "simulated": 0}
+    got = online._oracle([simulator], cands, poses, 2, [[key]], counts)
+    assert got.shape == (1, 1, 2, 64)
+    valid = np.asarray(ctx.candidates.valid)
+    want = simulator.success_probability(key, np.asarray(ctx.candidates.grasps)[0], 2,
+                                         valid[0], np.asarray(ctx.poses)[0])
+    np.testing.assert_array_equal(got[0, 0, 0], want.prob)
+    assert (got[0, 0][~valid] == 0).all()
+    assert counts["simulated"] == 2 * valid.sum()
+
+
+def test_regret_accounting(tiny_theta0, spec, tmp_path):
+    """With regret_trials, each round's pseudo-regret is finite, in [0, explore], NaN at
+    round 0, and reported in the table; greedy's equals best - oracle[chosen]."""
+    import dataclasses
+
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1,
+                                 rounds=1, explore=2, regret_trials=2)
+    res = online.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+                     log=_quiet)
+    pr = res["results"].pseudo_regret
+    assert np.isnan(pr[0]).all() and np.isfinite(pr[1:]).all()
+    assert (pr[1:] >= -1e-6).all() and (pr[1:] <= config.explore + 1e-6).all()
+    assert "oracle" in res["timings"]
+    for row in res["table"]:
+        assert len(row["pseudo_regret"]) == config.rounds
+    from sern_jax.grasp import learn_cli
+    assert "Pseudo-regret per round" in learn_cli.format_table(res["table"])
+    with pytest.raises(ValueError, match="regret_trials"):
+        dataclasses.replace(config, regret_trials=-1)
 
 
 def test_learner_told_only_failures_lowers_its_scores(tiny_theta0, spec, tmp_path,

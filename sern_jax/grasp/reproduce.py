@@ -27,7 +27,7 @@ LEARN_FULL = {"objects": 6, "seeds": 5, "rounds": 5}
 LEARN_QUICK = {"objects": 3, "seeds": 3, "rounds": 3}
 # Expected wall times on the project's idle 2-core machine (measured, see README), for the
 # estimate printed before a run starts.
-EXPECTED_S = {"check": 120, "regret": 50, "learn_full": 420, "learn_quick": 180}
+EXPECTED_S = {"check": 120, "regret": 50, "learn_full": 300, "learn_quick": 180}
 
 
 def add_parser(subparsers, *, check_run: Callable, regret_defaults, run_regret: Callable,
@@ -194,8 +194,17 @@ def _summary(check_doc, check_status, regret_dir, table, timings, out) -> str:
     for peer in ("egreedy", "greedy"):
         if peer in final and "sern" in final:
             w, l = _sern_vs(table, peer)
-            lines.append(f"                SERN vs {peer}: better on {w}, worse on {l} objects "
-                         "(5-grasp evaluation; see the paired figure for intervals)")
+            lines.append(f"                SERN vs {peer}: better on {w}, worse on {l}, equal "
+                         f"on {len(final['sern']) - w - l} objects (5-grasp evaluation; see "
+                         "the paired figure for intervals)")
+    lowvar = {}
+    for r in table:
+        if "lowvar_rounds" in r:
+            lowvar.setdefault(r["policy"], []).append(r["lowvar_rounds"][-1])
+    if lowvar:
+        lines.append("                low-variance evaluation (fixed poses, many trials), final "
+                     "round: " + ", ".join(f"{p} {sum(v) / len(v):.0f}%"
+                                           for p, v in lowvar.items()))
     lines += [f"time          : {sum(timings.values()):.0f} s",
               f"report        : {out / 'report.md'}", "=" * 72]
     return "\n".join(lines)

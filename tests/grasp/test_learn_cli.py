@@ -138,7 +138,11 @@ def test_reproduce_counts_the_checks_of_a_real_report(tmp_path):
     regret.mkdir()
     (regret / "summary.json").write_text(json.dumps({"policies": {"softmax": {
         "regret_T_mean": 1.0}}}))
-    table = [{"object": "o", "policy": "sern", "rounds": [50.0]},
-             {"object": "o", "policy": "greedy", "rounds": [40.0]}]
+    table = [{"object": "o", "policy": "sern", "rounds": [50.0],
+              "lowvar_rounds": [30.0, 61.0]},
+             {"object": "o", "policy": "greedy", "rounds": [40.0],
+              "lowvar_rounds": [30.0, 64.0]}]
     text = reproduce._summary(doc, 1, regret, table, {"check_s": 1.0}, tmp_path)
     assert "1/2 verdicts as expected" in text and "NOT ALL AS EXPECTED" in text
+    assert "SERN vs greedy: better on 1, worse on 0, equal on 0 objects" in text
+    assert "final round: sern 61%, greedy 64%" in text

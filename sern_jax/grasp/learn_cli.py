@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import time
 from pathlib import Path
 from typing import Callable
@@ -349,19 +350,39 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+# OnlineConfig's field names -> the `sern grasp learn` flags that set them.
+_LEARN_FLAGS = {
+    "num_seeds": "--seeds", "rounds": "--rounds", "explore": "--explore",
+    "evaluate": "--evaluate", "alpha0": "--alpha0", "alpha": "--alpha",
+    "epsilon": "--epsilon", "eval_poses": "--eval-poses", "eval_trials": "--eval-trials",
+    "regret_trials": "--regret-trials", "fit_steps": "--fit-steps", "seed": "--seed",
+    "core_set": "--core-set", "loss": "--loss", "backend": "--backend",
+}
+
+
+def flag_names(message: str) -> str:
+    """An OnlineConfig error as the user typed it: setting names replaced by their flags."""
+    message = re.sub(r"\b(" + "|".join(_LEARN_FLAGS) + r")\b",
+                     lambda m: _LEARN_FLAGS[m.group(1)], message)
+    return re.sub(r"^p must", "--p must", message)
+
+
 def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     _check_out(args.out)
     _check_file_out(args.json_out)
     from sern_jax.grasp import online
 
     policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
-    config = online.OnlineConfig(
-        policies=policies, num_seeds=args.seeds, rounds=args.rounds, explore=args.explore,
-        evaluate=args.evaluate, alpha=args.alpha, epsilon=args.epsilon, alpha0=args.alpha0,
-        p=args.p, eval_poses=args.eval_poses, eval_trials=args.eval_trials,
-        regret_trials=args.regret_trials,
-        fit_steps=args.fit_steps, core_set=args.core_set, loss=args.loss, seed=args.seed,
-        backend=getattr(args, "backend", "native"))
+    try:
+        config = online.OnlineConfig(
+            policies=policies, num_seeds=args.seeds, rounds=args.rounds,
+            explore=args.explore, evaluate=args.evaluate, alpha=args.alpha,
+            epsilon=args.epsilon, alpha0=args.alpha0, p=args.p, eval_poses=args.eval_poses,
+            eval_trials=args.eval_trials, regret_trials=args.regret_trials,
+            fit_steps=args.fit_steps, core_set=args.core_set, loss=args.loss, seed=args.seed,
+            backend=getattr(args, "backend", "native"))
+    except ValueError as e:
+        raise ValueError(flag_names(str(e))) from None
     from sern_jax import io
     from sern_jax.grasp import artifacts
 
@@ -375,7 +396,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
         specs = _specs((), (), artifacts.hard_set(theta0)["objects"])
     t0 = time.perf_counter()
     out = Path(args.out) if args.out else Path("runs") / (
-        "learn-" + online.run_fingerprint(config, [s.name for s in specs], theta0))
+        "learn-" + online.run_fingerprint(config, specs, theta0))
     res = online.run(config, specs, out, theta0=theta0, progress=not args.no_progress, log=log)
     seconds = time.perf_counter() - t0
     write_learn_outputs(out, res, seconds, theta0)

@@ -336,9 +336,12 @@ def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.nda
 # ----------------------------------------------------------------------------- the run
 
 
-def run_fingerprint(config: OnlineConfig, names: list[str], theta0) -> str:
-    """What determines a run's results: the config, the objects and θ0."""
-    text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(list(names))
+def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
+                    theta0) -> str:
+    """What determines a run's results: the config, the objects (names and geometry, so
+    the same mesh file at another scale is another run) and θ0."""
+    objects = [(s.name, repr(s)) for s in specs]
+    text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(objects)
             + theta0.fingerprint)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -415,7 +418,7 @@ def run(
     core = artifacts.core_set_data(config.core_set, theta0)
     num_o, num_q, num_s = len(specs), len(config.policies), config.num_seeds
     num_r, num_e = config.rounds, config.explore
-    fingerprint = run_fingerprint(config, names, theta0)
+    fingerprint = run_fingerprint(config, specs, theta0)
 
     root = jax.random.key(config.seed)
     keys_os = [[object_key(root, n, s) for s in range(num_s)] for n in names]

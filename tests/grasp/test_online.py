@@ -346,7 +346,10 @@ def test_bad_config_is_a_clear_error(field, value, match):
     (["--policies", "sern,foo"], "unknown policy 'foo'"),
     (["--alpha", "0"], "alpha must be > 0"),
     (["--alpha", "-0.5"], "alpha must be > 0"),
-    (["--eval-poses", "-1"], "eval_poses"),
+    (["--eval-poses", "-1"], "--eval-poses must be an integer >= 0"),
+    (["--regret-trials", "-2"], "--regret-trials must be an integer >= 0"),
+    (["--eval-trials", "0"], "--eval-trials must be >= 1 when --eval-poses > 0"),
+    (["--p", "1.5"], "--p must be in (0, 1)"),
     (["--mesh", "/nonexistent/part.obj"], "mesh file not found"),
     (["small_box", "small_box"], "given twice"),
 ])
@@ -363,6 +366,21 @@ def test_learn_cli_bad_input_fails_fast(argv, match, capsys, monkeypatch, tmp_pa
     err = capsys.readouterr().err
     assert status == 2
     assert match in err and err.count("\n") == 1, err
+
+
+def test_run_fingerprint_sees_geometry(tiny_theta0, spec):
+    """The same name with other geometry (a mesh at another --mesh-units) is another run."""
+    import dataclasses
+
+    scaled = dataclasses.replace(spec, geoms=tuple(
+        dataclasses.replace(g, size=tuple(2 * x for x in g.size),
+                            vertices=tuple(tuple(2 * x for x in v) for v in g.vertices))
+        for g in spec.geoms))
+    assert scaled.name == spec.name
+    assert (online.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            != online.run_fingerprint(CONFIG, [scaled], tiny_theta0))
+    assert (online.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            == online.run_fingerprint(CONFIG, [objects.make_object(OBJECT)], tiny_theta0))
 
 
 def test_learn_cli_zero_rounds_is_an_argument_error(capsys):

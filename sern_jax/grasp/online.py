@@ -357,6 +357,14 @@ def _stack(items):
     return jax.tree.map(lambda *xs: np.stack(xs), *items)
 
 
+def _seed_noise(simulator, keys, num) -> sim_lib.TrialNoise:
+    """Trial noise of each seed's key, stacked: fields [S, num, ...]; trial j of seed s is
+    ``sample_noise(keys[s], num)[j]``."""
+    draws = [sim_lib.sample_noise(k, num, simulator.config) for k in keys]
+    return sim_lib.TrialNoise(*(np.stack([np.asarray(d[f]) for d in draws])
+                                for f in range(len(sim_lib.TrialNoise._fields))))
+
+
 def _run_trials(simulators, grasps, poses, noise_keys, n_per_key, counts=None):
     """Runs every object's trials.
 
@@ -375,10 +383,7 @@ def _run_trials(simulators, grasps, poses, noise_keys, n_per_key, counts=None):
     out = np.zeros((num_o, num_s, num_q, num_n), bool)
     s_i, _, n_i = np.indices((num_s, num_q, num_n)).reshape(3, -1)
     for o, simulator in enumerate(simulators):
-        noises = [sim_lib.sample_noise(noise_keys[o][s], n_per_key, simulator.config)
-                  for s in range(num_s)]
-        noise = sim_lib.TrialNoise(*(np.stack([np.asarray(nz[f]) for nz in noises])
-                                     for f in range(3)))  # [S, N, ...]
+        noise = _seed_noise(simulator, noise_keys[o], n_per_key)  # [S, N, ...]
         flat = np.ascontiguousarray(grasps[o].reshape(-1, 4), np.float64)
         key = np.concatenate([s_i[:, None], n_i[:, None], flat.view(np.int64)], axis=1)
         _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -602,10 +607,7 @@ def _oracle(simulators, cands, poses, num_trials, noise_keys, counts):
         s_i, n_i, k_i = np.nonzero(valid[o])
         if not len(s_i):
             continue
-        noise = [sim_lib.sample_noise(noise_keys[o][s], num_n * m, simulator.config)
-                 for s in range(num_s)]
-        noise = sim_lib.TrialNoise(*(np.stack([np.asarray(nz[f]) for nz in noise])
-                                     for f in range(3)))  # [S, N * M, ...]
+        noise = _seed_noise(simulator, noise_keys[o], num_n * m)  # [S, N * M, ...]
         rows_s = np.repeat(s_i, m)
         rows_t = (n_i[:, None] * m + np.arange(m)[None]).reshape(-1)
         res = simulator.run_trials(

@@ -3,7 +3,9 @@
 Each setting is a list of runs of ``online.run`` (one run directory each, resumable) on the
 shipped hard set; ``summary.json`` gathers the final-round success of every run with paired
 95 % intervals over seeds (common random numbers make the seeds paired across policies and
-across the ablation's variants, which share keys).
+across the ablation's variants, which share keys). Intervals are Student t over the seeds
+(n − 1 dof, ``sern_jax.stats``); the comparisons of a setting are reported together, so each
+row also carries its Holm-adjusted p-value and whether its sign is resolved after Holm.
 
     python -m experiments.grasp_learning paper            # 6 objects x 3 policies x 5 seeds
     python -m experiments.grasp_learning strong           # 20 seeds, low-variance evaluation
@@ -20,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import time
 from pathlib import Path
 
@@ -49,12 +50,13 @@ def runs_of(setting: str, base):
 
 
 def _paired(a, b):
-    """Mean and 95 % half-width of the per-seed difference a - b."""
+    """Mean and 95 % Student-t half-width (n − 1 dof) of the per-seed difference a - b."""
     import numpy as np
 
-    d = np.asarray(a) - np.asarray(b)
-    half = 1.96 * d.std(ddof=1) / math.sqrt(len(d)) if len(d) > 1 else float("nan")
-    return float(d.mean()), float(half)
+    from sern_jax import stats
+
+    ci = stats.t_interval(np.asarray(a, np.float64) - np.asarray(b, np.float64), 0.95)
+    return ci.mean, ci.half
 
 
 def main(argv=None) -> int:
@@ -108,13 +110,27 @@ def main(argv=None) -> int:
                "pooled": _paired(a.mean(0), b.mean(0)),
                "per_object": {n: _paired(a[o], b[o]) for o, n in enumerate(hard["objects"])}}
         comps.append(row)
+    # Holm over the pooled comparisons reported together (the printed lines below)
+    if comps and len(finals[ref].T) > 1:
+        from sern_jax import stats
+
+        rows = stats.paired_differences(
+            np.stack([finals[ref].mean(0) for _ in keys[1:]]),
+            np.stack([finals[k].mean(0) for k in keys[1:]]),
+            names=[" - ".join(map(str, k)) for k in keys[1:]])
+        for c, row in zip(comps, rows):
+            c["pooled_t"] = row._asdict()
     summary["paired_final_round"] = comps
+    summary["interval"] = ("Student t over seeds (n - 1 dof), 95 %, per comparison; "
+                           "pooled_t adds the Holm-adjusted p-value over the pooled rows")
     summary["metric"] = "final-round greedy success (low-variance evaluation where run)"
     summary["metadata"] = io.run_metadata()
     io.save_json(out / "summary.json", summary)
     for c in comps:
         m, h = c["pooled"]
-        print(f"{c['a']} - {c['b']}: {100 * m:+.1f} ± {100 * h:.1f} points (pooled, 95% CI)")
+        holm = c.get("pooled_t", {}).get("pvalue_holm", float("nan"))
+        print(f"{c['a']} - {c['b']}: {100 * m:+.1f} ± {100 * h:.1f} points (pooled, 95% t "
+              f"interval over seeds; Holm-adjusted p = {holm:.3f} over {len(comps)})")
     print(f"wrote {out / 'summary.json'}")
     return 0
 

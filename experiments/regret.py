@@ -422,7 +422,7 @@ def fit_slope(t: np.ndarray, curves: np.ndarray, t_min: float, num_boot: int = 2
 def summarise(exp: RegretExperiment, merged: dict) -> dict:
     """Per policy: final regret (mean, 95% CI, both definitions) and the fitted log–log slope;
     and SERN's α(T) with Theorem 1's c = e^{-1/α}/K and the exact π_min (``theorem1``)."""
-    from sern_jax import schedules, theory
+    from sern_jax import schedules, stats, theory
 
     t = merged["t"].astype(np.float64)
     alpha = float(schedules.alpha_of_horizon(exp.schedule, exp.horizon, exp.alpha0, exp.p))
@@ -433,12 +433,12 @@ def summarise(exp: RegretExperiment, merged: dict) -> dict:
     for policy in exp.policies:
         reg = merged[f"{policy}__regret_rb"].astype(np.float64)
         final = reg[:, -1]
-        se = final.std(ddof=1) / np.sqrt(final.size) if final.size > 1 else float("nan")
+        ci = stats.t_interval(final, 0.95)  # Student t over seeds, n - 1 dof
         paper = merged[f"{policy}__regret_rb_paper"][:, -1].astype(np.float64)
         realised = merged[f"{policy}__regret"][:, -1].astype(np.float64)
         out["policies"][policy] = {
             "regret_T_mean": float(final.mean()),
-            "regret_T_ci95": [float(final.mean() - 1.96 * se), float(final.mean() + 1.96 * se)],
+            "regret_T_ci95": [ci.lower, ci.upper],
             "regret_T_realised_mean": float(realised.mean()),
             "regret_paper_T_mean": float(paper.mean()),
             "regret_over_T": float(final.mean() / exp.horizon),
@@ -456,7 +456,7 @@ def _write_report(run_dir: Path, exp: RegretExperiment, summary: dict, meta: dic
         f"schedule={exp.schedule} (α0={exp.alpha0}, p={exp.p}), ε={exp.epsilon}, "
         f"root seed {exp.seed}.", "",
         "Regret is Rao–Blackwellised pseudo-regret, Σ_t (max_a r_a(s_t) − Σ_a π_t(a) r_a(s_t)),"
-        " mean over seeds with a 95% CLT interval; the slope is the log–log OLS slope of the "
+        " mean over seeds with a 95% Student-t interval (n − 1 dof); the slope is the log–log OLS slope of the "
         "mean curve over the last decade of t, with a 95% seed-bootstrap interval (slope 1 = "
         "linear regret).", "",
         "| policy | R_T (mean) | 95% CI | R_T/T | paper's R_T | slope (last decade) |",

@@ -24,7 +24,6 @@ Saves ``results.json``; ``figures/make_theory_grasping_fig.py`` draws it.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 
@@ -50,7 +49,7 @@ def main(argv=None) -> int:
     import numpy as np
     import optax
 
-    from sern_jax import io, schedules, theory
+    from sern_jax import io, schedules, stats, theory
     from sern_jax.grasp import artifacts, dataset, env, objects, pretrain
     from sern_jax.grasp import quality_net as qn
 
@@ -127,8 +126,7 @@ def main(argv=None) -> int:
     ns = np.asarray(NS, float)
     beta_seed = (errs * np.sqrt(ns + 1)[None, :, None]).max(1).mean(0)  # per seed: sup_n
     beta = float(beta_seed.mean())
-    half = float(1.96 * beta_seed.std(ddof=1) / math.sqrt(len(beta_seed))) \
-        if len(beta_seed) > 1 else float("nan")
+    half = stats.t_interval(beta_seed, 0.95).half  # Student t, n - 1 dof (nan for 1 seed)
     slope = float(np.polyfit(np.log(ns[1:] + 1), np.log(errs[:, 1:].mean((0, 2))), 1)[0])
     d2_all = np.concatenate([v["delta2"] for v in out["objects"].values()])
     d2_med = float(np.median(d2_all))

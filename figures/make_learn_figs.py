@@ -1,7 +1,8 @@
 """Figures of a ``sern grasp learn`` run, from its saved ``results.npz`` and ``config.json``.
 
 * ``figures/success.png``: per object, greedy success per round (round 0 = θ0) for each policy,
-  mean over seeds with a 95 % band (normal approximation over seeds), the paper's 5-grasp
+  mean over seeds with a 95 % Student-t band over seeds (n − 1 dof; clipped to [0, 100] %),
+  the paper's 5-grasp
   evaluation solid and the low-variance evaluation dashed where it was run.
 * ``figures/paired.png``: per object and pooled, the final-round difference SERN − peer
   (low-variance evaluation where available) with paired 95 % confidence intervals over seeds.
@@ -19,11 +20,20 @@ __all__ = ["make_figures"]
 
 
 def _band(x: np.ndarray):
-    """Mean and 95 % half-width over the last axis (seeds)."""
+    """Mean and 95 % Student-t half-width (n − 1 dof) over the last axis (seeds); zero
+    width with one seed (no interval: the title says how many seeds)."""
+    from sern_jax import stats
+
     n = x.shape[-1]
     mean = x.mean(-1)
-    half = 1.96 * x.std(-1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
-    return mean, half
+    if n < 2:
+        return mean, np.zeros_like(mean)
+    return mean, np.asarray(stats.t_half_width(x.std(-1, ddof=1), n, 0.95))
+
+
+def _fill(ax, x, m, h, **kwargs):
+    """A band m ± h clipped to the possible range [0, 100] %."""
+    ax.fill_between(x, np.clip(m - h, 0, 100), np.clip(m + h, 0, 100), **kwargs)
 
 
 def make_figures(run_dir: str | Path) -> list[Path]:
@@ -54,11 +64,11 @@ def make_figures(run_dir: str | Path) -> list[Path]:
             c = colours.get(pol, f"C{q + 4}")
             m, h = _band(paper[:, o, q, :])
             ax.plot(rounds, m, "-o", color=c, ms=3, label=f"{pol} (paper eval)")
-            ax.fill_between(rounds, m - h, m + h, color=c, alpha=0.12)
+            _fill(ax, rounds, m, h, color=c, alpha=0.12)
             if has_lv:
                 m, h = _band(lowvar[:, o, q, :])
                 ax.plot(rounds, m, "--", color=c, lw=1.2, label=f"{pol} (low-variance)")
-                ax.fill_between(rounds, m - h, m + h, color=c, alpha=0.08)
+                _fill(ax, rounds, m, h, color=c, alpha=0.08)
         ax.set_title(name, fontsize=10)
         ax.set_xlabel("round (0 = θ0)")
         ax.set_ylabel("greedy success %")
@@ -68,7 +78,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         axes[k // cols][k % cols].axis("off")
     axes[0][0].legend(fontsize=6, loc="lower right")
     seeds = paper.shape[-1]
-    fig.suptitle(f"Greedy success per round, mean over {seeds} seeds, 95% bands", fontsize=11)
+    fig.suptitle(f"Greedy success per round, mean over {seeds} seeds, 95% t bands", fontsize=11)
     fig.tight_layout()
     out = [run_dir / "figures" / "success.png"]
     out[0].parent.mkdir(parents=True, exist_ok=True)
@@ -99,7 +109,8 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         ax.set_yticks([t[0] for t in ticks], [t[1] for t in ticks], fontsize=7)
         ax.invert_yaxis()
         ax.set_xlabel(f"final-round success difference, percentage points ({label})")
-        ax.set_title("Paired differences over seeds (common random numbers), 95% CI",
+        ax.set_title(f"Paired differences over {seeds} seeds (common random numbers), "
+                     "95% t intervals (unadjusted)",
                      fontsize=9)
         fig.tight_layout()
         out.append(run_dir / "figures" / "paired.png")

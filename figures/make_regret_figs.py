@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sern_jax import io
+from sern_jax import io, stats
 
 __all__ = ["make_figures"]
 
@@ -36,10 +36,12 @@ def make_figures(run_dir: str | Path) -> list[Path]:
     for policy in policies:
         reg = res[f"{policy}__regret_rb"].astype(float)
         mean = reg.mean(0)
-        se = reg.std(0, ddof=1) / np.sqrt(reg.shape[0]) if reg.shape[0] > 1 else 0 * mean
+        n = reg.shape[0]
+        half = (np.asarray(stats.t_half_width(reg.std(0, ddof=1), n, 0.95)) if n > 1
+                else 0 * mean)  # Student t over seeds, n - 1 dof
         sl = summary["policies"][policy]["slope_last_decade"]
         line, = ax.plot(t, mean, label=f"{policy} (slope {sl['slope']:.2f})")
-        ax.fill_between(t, np.maximum(mean - 1.96 * se, 1e-3), mean + 1.96 * se,
+        ax.fill_between(t, np.maximum(mean - half, 1e-3), mean + half,
                         color=line.get_color(), alpha=0.25, linewidth=0)
     ax.plot(t, t * np.nanmax([res[f"{p}__regret_rb"][:, -1].mean() for p in policies])
             / t[-1], "k:", lw=1, label="linear reference")
@@ -48,7 +50,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
     ax.set_xlabel("round t")
     ax.set_ylabel("cumulative pseudo-regret (Rao–Blackwellised)")
     ax.set_title(f"K={cfg['num_arms']}, {cfg['num_seeds']} seeds, α0={cfg['alpha0']} "
-                 f"({cfg['schedule']}), ε={cfg['epsilon']}\nbands: 95% CI of the mean; "
+                 f"({cfg['schedule']}), ε={cfg['epsilon']}\nbands: 95% t interval of the mean; "
                  f"slopes over the last decade")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)

@@ -1,18 +1,49 @@
-"""Host-side I/O: run directories, atomic writes, metadata, checkpoints.
+"""Host-side I/O: run directories, atomic writes, verified npz files, run locks, metadata.
 
 Never imported by jitted code. Every write goes to a temporary file in the same directory
 followed by ``os.replace``, so an interrupted run never leaves a half-written result file.
+
+Verified npz files. :func:`save_npz` stores, inside the archive, a SHA-256 of every array
+(name, dtype, shape, bytes) under :data:`DIGEST_KEY`; the zip format adds a CRC-32 and the
+length of every member and a central directory at the end. :func:`load_npz` reads every member
+back and checks all three, so a truncated, empty, overwritten or random file raises
+:class:`DamagedFileError` (a ``ValueError`` whose message is one line: the file, what is wrong,
+what to do) instead of ``BadZipFile`` / ``EOFError`` / ``zlib.error`` from deep inside numpy.
+Files written before the digest existed load as before (zip CRC and lengths still checked).
+Deterministic units (D0 shards, regret seed chunks) use :func:`load_npz_unit` /
+:func:`npz_unit_done`: a damaged unit is moved aside to ``<name>.damaged``, reported as
+``damaged -> recomputing`` and treated as missing, so the caller recomputes it.
+
+Run locks. :func:`run_lock` holds an exclusive ``flock`` on ``<run dir>/.sern.lock`` while a
+command writes that directory. A second process gets :class:`RunLockedError` at once (one line:
+the directory, the holder's pid, host, start time and command). The kernel drops a ``flock``
+when its process dies (``kill -9`` included), so a killed run leaves no stale lock: the file
+stays, unlocked, and the next run takes it. On one machine this is exact. On a cluster: Linux
+maps ``flock`` on NFS to a POSIX lock held by the NFS server (NFSv4 releases it when the dead
+client's lease expires, ~90 s); some parallel filesystems (Lustre without ``-o flock``) refuse
+it, and then :func:`run_lock` raises ``RunLockedError`` naming the filesystem error rather than
+running unlocked. With Ray, the driver process holds the run directory's lock and the workers
+write only deterministic unit files (atomically, by ``os.replace``): two workers computing the
+same unit write the same bytes, so units need no lock of their own.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime as _dt
+import hashlib
 import json
 import os
 import platform
+import socket
+import struct
 import subprocess
+import sys
 import tempfile
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +58,14 @@ __all__ = [
     "load_json",
     "save_npz",
     "load_npz",
+    "verify_npz",
+    "load_npz_unit",
+    "npz_unit_done",
+    "DamagedFileError",
+    "DIGEST_KEY",
+    "run_lock",
+    "RunLockedError",
+    "LOCK_FILE",
     "run_metadata",
     "to_jsonable",
 ]
@@ -120,18 +159,222 @@ def load_json(path: str | os.PathLike) -> Any:
         return json.load(f)
 
 
+DIGEST_KEY = "__sern_sha256__"  # the archive member holding the arrays' SHA-256
+DAMAGED_SUFFIX = ".damaged"
+
+
+class DamagedFileError(ValueError):
+    """A file that exists but does not read back as it was written (truncated, empty, random
+    bytes, another format, or contents that do not match their recorded SHA-256).
+
+    ``str(error)`` is one line: ``<path> is damaged (<reason>); <advice>``.
+    """
+
+    def __init__(self, path: str | os.PathLike, reason: str, advice: str):
+        self.path = Path(path)
+        self.reason = reason
+        self.advice = advice
+        super().__init__(f"{path} is damaged ({reason}); {advice}")
+
+
+def _digest(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes (names in sorted order)."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(json.dumps([name, a.dtype.str, list(a.shape)]).encode())
+        h.update(memoryview(a.reshape(-1).view(np.uint8)) if a.size else b"")
+    return h.hexdigest()
+
+
 def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
-    """Writes arrays to a compressed ``.npz``, atomically."""
+    """Writes arrays to a compressed ``.npz``, atomically, with their SHA-256 inside
+    (:data:`DIGEST_KEY`; :func:`load_npz` checks it and does not return it)."""
     import io as _io
 
+    if DIGEST_KEY in arrays:
+        raise ValueError(f"{DIGEST_KEY} is reserved for the file's checksum")
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
     buf = _io.BytesIO()
-    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in arrays.items()})
+    np.savez_compressed(buf, **arrays, **{DIGEST_KEY: np.asarray(_digest(arrays))})
     _atomic_write_bytes(Path(path), buf.getvalue())
 
 
-def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    with np.load(path, allow_pickle=False) as data:
-        return {k: data[k] for k in data.files}
+def _one_line(text: str, limit: int = 120) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _read_npz(path: Path) -> tuple[dict[str, np.ndarray] | None, str | None]:
+    """(arrays, None) for an intact file, (None, reason) for a damaged one. A missing or
+    unreadable (permission) file raises ``OSError``."""
+    size = os.stat(path).st_size  # FileNotFoundError / PermissionError propagate
+    if size == 0:
+        return None, "empty file, 0 bytes"
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(4)
+        if magic != b"PK\x03\x04":
+            return None, f"not an npz archive ({size:,} bytes that do not start as a zip file)"
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}  # reads every member: CRC and length
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, zlib.error, struct.error,
+            ValueError, KeyError, IndexError, UnicodeDecodeError, NotImplementedError) as exc:
+        reason = _one_line(f"{type(exc).__name__}: {exc}") if str(exc) else type(exc).__name__
+        if isinstance(exc, zipfile.BadZipFile) and "not a zip file" in str(exc):
+            reason = f"truncated or not an npz archive: {size:,} bytes, no zip directory"
+        return None, reason
+    except OSError as exc:  # an I/O error inside the archive (not a missing file)
+        if isinstance(exc, (FileNotFoundError, PermissionError)):
+            raise
+        return None, _one_line(f"{type(exc).__name__}: {exc}")
+    recorded = arrays.pop(DIGEST_KEY, None)
+    if recorded is not None and str(recorded) != _digest(arrays):
+        return None, "contents do not match their recorded SHA-256"
+    return arrays, None
+
+
+def load_npz(path: str | os.PathLike, *, advice: str | None = None) -> dict[str, np.ndarray]:
+    """Reads every array of an ``.npz`` written by :func:`save_npz`, verified.
+
+    Args:
+      path: the file.
+      advice: what the user should do if the file is damaged (the end of the error message);
+        default ``"delete it (or restore a copy) and rerun"``.
+
+    Returns:
+      name -> array (without the checksum member).
+
+    Raises:
+      FileNotFoundError: no such file (as ``open`` would).
+      DamagedFileError: truncated, empty, random bytes, another format, a member whose CRC or
+        length is wrong, or contents that do not match their SHA-256.
+    """
+    arrays, reason = _read_npz(Path(path))
+    if arrays is None:
+        raise DamagedFileError(path, reason, advice or "delete it (or restore a copy) and rerun")
+    return arrays
+
+
+def verify_npz(path: str | os.PathLike) -> str | None:
+    """None when ``path`` reads back intact; otherwise why it is damaged (one line).
+
+    Reads the whole file (every member is decompressed and checked). A missing file raises
+    ``FileNotFoundError``.
+    """
+    return _read_npz(Path(path))[1]
+
+
+def _set_aside(path: Path, reason: str, log: Callable[[str], None] | None) -> None:
+    aside = path.with_name(path.name + DAMAGED_SUFFIX)
+    os.replace(path, aside)
+    if log is not None:
+        log(f"{path}: damaged ({reason}) -> recomputing (the damaged file is kept as "
+            f"{aside.name})")
+
+
+def load_npz_unit(path: str | os.PathLike,
+                  log: Callable[[str], None] | None = print) -> dict[str, np.ndarray] | None:
+    """Loads a deterministic unit of work (a D0 shard, a regret seed chunk), or None.
+
+    None when the file is missing, or damaged: a damaged file is renamed to
+    ``<name>.damaged`` (kept for inspection, never read again), ``log`` gets one line
+    ``<path>: damaged (<reason>) -> recomputing ...``, and the caller recomputes the unit as
+    if it had never been written. Only for files whose contents a rerun reproduces exactly.
+    """
+    path = Path(path)
+    try:
+        arrays, reason = _read_npz(path)
+    except FileNotFoundError:
+        return None
+    if arrays is None:
+        _set_aside(path, reason, log)
+    return arrays
+
+
+def npz_unit_done(path: str | os.PathLike, log: Callable[[str], None] | None = print) -> bool:
+    """True when the unit file exists and reads back intact; False when it is missing or was
+    damaged (then set aside and reported as by :func:`load_npz_unit`)."""
+    return load_npz_unit(path, log) is not None
+
+
+# ----------------------------------------------------------------------------- run locks
+
+LOCK_FILE = ".sern.lock"
+
+
+class RunLockedError(ValueError):
+    """Another live process holds the run directory's lock (or the filesystem refuses locks).
+
+    ``str(error)`` is one line naming the directory, the holder and what to do.
+    """
+
+
+def _holder_text(lock_path: Path) -> str:
+    try:
+        info = json.loads(lock_path.read_text() or "{}")
+    except (OSError, ValueError):
+        info = {}
+    if not info:
+        return "another process"
+    return (f"pid {info.get('pid')} on {info.get('host')} since {info.get('started')}: "
+            f"{_one_line(info.get('command', '?'), 80)}")
+
+
+@contextlib.contextmanager
+def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Iterator[Path]:
+    """Holds the exclusive lock of a run directory while the block runs.
+
+    Creates ``run_dir`` (and parents) if needed, then takes a non-blocking ``flock`` on
+    ``run_dir/.sern.lock`` and writes the holder (pid, host, UTC start time, command line)
+    into it. Released on exit, and by the kernel if the process dies (no stale locks).
+
+    Call it after validating the inputs (it creates the directory); re-read anything another
+    process could have written (config.json, checkpoints) after entering, under the lock.
+
+    Args:
+      run_dir: the run directory.
+      command: shown to a second process (default: this process's command line).
+
+    Yields:
+      ``run_dir`` as a Path.
+
+    Raises:
+      RunLockedError: a live process holds the lock, or the filesystem does not support locks.
+    """
+    import fcntl
+
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    lock_path = run_dir / LOCK_FILE
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RunLockedError(
+                f"{run_dir} is in use by {_holder_text(lock_path)}; wait for that run to "
+                "finish (or stop it), then rerun; a killed run's lock is released by itself"
+            ) from None
+        except OSError as exc:
+            raise RunLockedError(
+                f"{run_dir}: this filesystem refuses file locks ({exc.strerror or exc}); "
+                "use a run directory on a local or lock-capable filesystem") from None
+        info = {"pid": os.getpid(), "host": socket.gethostname(),
+                "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "command": command if command is not None else " ".join(
+                    [Path(sys.argv[0]).name, *sys.argv[1:]])}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        try:
+            yield run_dir
+        finally:
+            # the file stays (unlinking it would let two processes lock two inodes); emptied
+            # so that it names no holder while unlocked
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)  # releases the flock
 
 
 def peak_rss_mb() -> float:

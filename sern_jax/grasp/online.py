@@ -347,9 +347,9 @@ def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
 
 
 
-def _contexts(key, spec, num, model):
+def _contexts(key, spec, num, model, config=context_lib.ContextConfig()):
     """Contexts of one object as numpy (poses [n, 7], depth [n, H, W], candidates [n, K])."""
-    ctx = context_lib.make_contexts(key, spec, num, model=model)
+    ctx = context_lib.make_contexts(key, spec, num, config, model=model)
     return ctx.poses, ctx.depth, ctx.candidates
 
 
@@ -406,8 +406,15 @@ def run(
     theta0: artifacts.Theta0 | None = None,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    context_config: context_lib.ContextConfig | None = None,
+    trial_config: sim_lib.TrialConfig | None = None,
 ) -> dict:
     """Runs (or resumes) the online learning experiment; returns the results dict.
+
+    ``context_config`` (scene physics such as the finger force and pad friction, depth
+    noise) and ``trial_config`` (the trial's randomisation) choose the simulated world;
+    None = the defaults every shipped result uses. A non-default world enters the run's
+    fingerprint (the defaults leave existing fingerprints unchanged).
 
     The state after each finished round is saved to ``out_dir/checkpoint.npz``: rerunning
     the same command resumes after the last finished round and gives the same table.
@@ -424,12 +431,17 @@ def run(
     num_o, num_q, num_s = len(specs), len(config.policies), config.num_seeds
     num_r, num_e = config.rounds, config.explore
     fingerprint = run_fingerprint(config, specs, theta0)
+    context_config = context_config or context_lib.ContextConfig()
+    trial_config = trial_config or sim_lib.TrialConfig()
+    if (context_config, trial_config) != (context_lib.ContextConfig(), sim_lib.TrialConfig()):
+        fingerprint = hashlib.sha256(
+            (fingerprint + repr(context_config) + repr(trial_config)).encode()).hexdigest()[:16]
 
     root = jax.random.key(config.seed)
     keys_os = [[object_key(root, n, s) for s in range(num_s)] for n in names]
-    models = [context_lib.scene_model(spec) for spec in specs]
-    simulators = [sim_lib.GraspSimulator(m, backend=config.backend, mjx_batch=MJX_BATCH)
-                  for m in models]
+    models = [context_lib.scene_model(spec, context_config) for spec in specs]
+    simulators = [sim_lib.GraspSimulator(m, backend=config.backend, config=trial_config,
+                                         mjx_batch=MJX_BATCH) for m in models]
     alphas = jnp.asarray([config.policy_alpha(n) for n in config.policies], jnp.float32)
     epsilon = jnp.float32(config.epsilon)
     choose = _batched_choose(network, config.policies, crops_lib.CropConfig())
@@ -475,7 +487,8 @@ def run(
     lowvar = None
     if config.eval_poses:
         lowvar = [[_contexts(_stream(keys_os[o][s], LOWVAR_CONTEXT, 0), specs[o],
-                             config.eval_poses, models[o]) for s in range(num_s)]
+                             config.eval_poses, models[o], context_config)
+                   for s in range(num_s)]
                   for o in range(num_o)]
 
     from tqdm.auto import tqdm
@@ -486,7 +499,8 @@ def run(
     def evaluate(r, params):
         t = time.perf_counter()
         ev = [[_contexts(_stream(keys_os[o][s], EVAL_CONTEXT, r), specs[o], config.evaluate,
-                         models[o]) for s in range(num_s)] for o in range(num_o)]
+                         models[o], context_config) for s in range(num_s)]
+              for o in range(num_o)]
         poses = np.stack([[e[0] for e in row] for row in ev])
         depth = np.stack([[e[1] for e in row] for row in ev])
         cands = _stack([_stack([e[2] for e in row]) for row in ev])
@@ -531,7 +545,8 @@ def run(
         # 1. exploration
         t = time.perf_counter()
         ex = [[_contexts(_stream(keys_os[o][s], EXPLORE_CONTEXT, r), specs[o], num_e,
-                         models[o]) for s in range(num_s)] for o in range(num_o)]
+                         models[o], context_config) for s in range(num_s)]
+              for o in range(num_o)]
         poses = np.stack([[e[0] for e in row] for row in ex])  # [O, S, E, 7]
         depth = np.stack([[e[1] for e in row] for row in ex])
         cands = _stack([_stack([e[2] for e in row]) for row in ex])

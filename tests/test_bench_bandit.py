@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from sern_jax import cli
+from sern_jax.commands import main as cli
 
 
 def test_bench_bandit_json(capsys):

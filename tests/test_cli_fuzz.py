@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from sern_jax import cli
+from sern_jax.commands import main as cli
 
 REGRET = ["regret", "--policies", "softmax", "--arms", "3", "--horizon", "20", "--seeds", "2",
           "--no-progress", "--no-figures", "--out", "run"]

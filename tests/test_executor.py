@@ -178,7 +178,6 @@ def test_memory_full_size():
 ROOT = Path(__file__).resolve().parents[1]
 CORE = sorted(p.stem for p in (ROOT / "sern_jax").glob("*.py") if p.stem != "__init__")
 SCRIPT_FOLDERS = ("experiments", "figures", "proofs_check")
-CLI_MODULE = "cli"  # the one library module that wires the script folders
 
 
 def _imports(module: str) -> set[str]:
@@ -202,10 +201,10 @@ def test_core_import_graph_has_no_cycle_and_no_script_folders():
         graph[module] = {d.split(".")[1] for d in deps
                          if d.startswith("sern_jax.") and d.split(".")[1] in CORE}
         tops = {d.split(".")[0] for d in deps}
-        if module != CLI_MODULE:
-            assert not tops & set(SCRIPT_FOLDERS), (module, tops & set(SCRIPT_FOLDERS))
+        # only the command modules (sern_jax/commands/) wire the script folders
+        assert not tops & set(SCRIPT_FOLDERS), (module, tops & set(SCRIPT_FOLDERS))
         assert not tops & {"mujoco", "flax"}, module
-        assert not any(d.startswith("sern_jax.grasp") for d in deps) or module == CLI_MODULE
+        assert not any(d.startswith(("sern_jax.grasp", "sern_jax.commands")) for d in deps), module
     assert graph["executor"] >= {"simulate", "fast_softmax"}
     assert not graph["simulate"] & {"executor", "fast_softmax"}
     assert "executor" not in graph["fast_softmax"]
@@ -249,4 +248,4 @@ def test_package_reexports_core_modules_lazily():
     res = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
                          text=True, timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
     assert res.returncode == 0, res.stderr[-2000:]
-    assert set(CORE) - {CLI_MODULE} >= set(__import__("sern_jax").__all__[1:])
+    assert set(CORE) >= set(__import__("sern_jax").__all__[1:])

@@ -9,7 +9,8 @@ import json
 
 import pytest
 
-from proofs_check import cli, framework, registry
+from proofs_check import framework, registry
+from sern_jax.commands import check as cli
 
 
 def _args(tmp, **kw):

@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import cli, io
+from sern_jax import io
+from sern_jax.commands import main as cli
 
 ARGS = ["regret", "--policies", "softmax,greedy", "--arms", "4", "--horizon", "200",
         "--seeds", "60", "--chunk-size", "25", "--checkpoints", "8", "--no-progress"]

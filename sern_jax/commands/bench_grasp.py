@@ -231,7 +231,7 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
 
 
 def run(args) -> int:
-    from sern_jax.grasp.show import import_mjx_quietly
+    from sern_jax.commands.grasp_show import import_mjx_quietly
 
     import_mjx_quietly()
     _validate(args)
@@ -419,7 +419,7 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    """``python -m sern_jax.grasp.bench grasp ...`` (the same as ``sern bench grasp ...``)."""
+    """``python -m sern_jax.commands.bench_grasp grasp ...`` (the same as ``sern bench grasp ...``)."""
     parser = argparse.ArgumentParser(prog="sern bench")
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser(sub)

@@ -1,6 +1,6 @@
 """``sern grasp dataset | pretrain | screen | learn``: arguments only; work happens in
 :mod:`dataset`, :mod:`pretrain` and :mod:`online` (imported inside each command, so
-``sern --help`` stays instant). Figures are handed in by :mod:`sern_jax.cli`."""
+``sern --help`` stays instant). Figures are handed in by :mod:`sern_jax.commands.main`."""
 
 from __future__ import annotations
 

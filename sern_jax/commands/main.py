@@ -15,33 +15,34 @@ __all__ = ["main", "build_parser", "add_regret_parser", "add_reproduce_parser",
 
 # (module, attribute) contributing top-level commands.
 _TOP_LEVEL = (
-    ("sern_jax.cli", "add_reproduce_parser"),  # sern reproduce (the main job)
-    ("sern_jax.cli", "add_regret_parser"),  # sern regret (wires experiments/ and figures/)
-    ("proofs_check.cli", "add_parser"),  # sern check
+    ("sern_jax.commands.main", "add_reproduce_parser"),  # sern reproduce (the main job)
+    ("sern_jax.commands.main", "add_regret_parser"),  # sern regret (wires experiments/ and figures/)
+    ("sern_jax.commands.check", "add_parser"),  # sern check
 )
 # Commands under `sern bench ...`.
 _BENCH = (
-    ("sern_jax.bench_bandit", "add_parser"),  # sern bench bandit
-    ("sern_jax.grasp.bench", "add_parser"),  # sern bench grasp
+    ("sern_jax.commands.bench_bandit", "add_parser"),  # sern bench bandit
+    ("sern_jax.commands.bench_grasp", "add_parser"),  # sern bench grasp
 )
 # Commands under `sern grasp ...`.
 _GRASP = (
-    ("sern_jax.grasp.show", "add_parser"),  # sern grasp show
-    ("sern_jax.grasp.learn_cli", "add_dataset_parser"),  # sern grasp dataset
-    ("sern_jax.grasp.learn_cli", "add_pretrain_parser"),  # sern grasp pretrain
-    ("sern_jax.grasp.learn_cli", "add_screen_parser"),  # sern grasp screen
-    ("sern_jax.cli", "add_learn_parser"),  # sern grasp learn (wires figures/)
+    ("sern_jax.commands.grasp_show", "add_parser"),  # sern grasp show
+    ("sern_jax.commands.grasp_learn", "add_dataset_parser"),  # sern grasp dataset
+    ("sern_jax.commands.grasp_learn", "add_pretrain_parser"),  # sern grasp pretrain
+    ("sern_jax.commands.grasp_learn", "add_screen_parser"),  # sern grasp screen
+    ("sern_jax.commands.main", "add_learn_parser"),  # sern grasp learn (wires figures/)
 )
 
 
 def add_regret_parser(subparsers) -> None:
-    """``sern regret``: this module is the one library module that imports the script folders
-    (``experiments/``, ``figures/``); it hands their functions to :mod:`sern_jax.regret_cli`."""
+    """``sern regret``: the command modules are the only modules that import the script folders
+    (``experiments/``, ``figures/``); this hands their functions to
+    :mod:`sern_jax.commands.regret`."""
     from experiments import regret
     from figures import make_regret_figs
-    from sern_jax import regret_cli
+    from sern_jax.commands import regret as regret_cmd
 
-    regret_cli.add_parser(subparsers, defaults=regret.RegretExperiment(),
+    regret_cmd.add_parser(subparsers, defaults=regret.RegretExperiment(),
                           run_experiment=regret.run_experiment,
                           make_figures=make_regret_figs.make_figures)
 
@@ -49,18 +50,18 @@ def add_regret_parser(subparsers) -> None:
 def add_learn_parser(subparsers) -> None:
     """``sern grasp learn``, with its figure maker from ``figures/``."""
     from figures import make_learn_figs
-    from sern_jax.grasp import learn_cli
+    from sern_jax.commands import grasp_learn
 
-    learn_cli.add_learn_parser(subparsers, make_figures=make_learn_figs.make_figures)
+    grasp_learn.add_learn_parser(subparsers, make_figures=make_learn_figs.make_figures)
 
 
 def add_reproduce_parser(subparsers) -> None:
     """``sern reproduce``: the check runner, the regret experiment and the figure makers are
-    handed to :mod:`sern_jax.grasp.reproduce` from the script folders here."""
+    handed to :mod:`sern_jax.commands.reproduce` from the script folders here."""
     from experiments import regret
     from figures import make_learn_figs, make_regret_figs
-    from proofs_check import cli as check_cli
-    from sern_jax.grasp import reproduce
+    from sern_jax.commands import check as check_cli
+    from sern_jax.commands import reproduce
 
     reproduce.add_parser(subparsers, check_run=check_cli.run,
                          regret_defaults=regret.RegretExperiment(),

@@ -2,7 +2,7 @@
 
 This module owns the command's arguments only. The experiment and the figures live in the
 script folders (``experiments/regret.py``, ``figures/make_regret_figs.py``), which library
-modules never import: :mod:`sern_jax.cli` imports them and hands them to :func:`add_parser`.
+modules never import: :mod:`sern_jax.commands.main` imports them and hands them to :func:`add_parser`.
 """
 
 from __future__ import annotations

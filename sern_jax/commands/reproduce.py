@@ -9,7 +9,7 @@
 then one ``report.md`` with the three parts and their figures, and a one-screen summary.
 
 This module owns the arguments and the composition; the check runner, the regret experiment
-and the figure makers live in the script folders and are handed in by :mod:`sern_jax.cli`.
+and the figure makers live in the script folders and are handed in by :mod:`sern_jax.commands.main`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def add_parser(subparsers, *, check_run: Callable, regret_defaults, run_regret: 
 
 def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_figures) -> int:
     from sern_jax import io
-    from sern_jax.grasp import learn_cli
+    from sern_jax.commands import grasp_learn as learn_cli
 
     name = "reproduce-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S") + (
         "-quick" if args.quick else "")
@@ -145,7 +145,7 @@ def _sern_vs(table: list[dict], peer: str) -> tuple[int, int]:
 
 def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, size, timings,
             quick) -> str:
-    from sern_jax.grasp import learn_cli
+    from sern_jax.commands import grasp_learn as learn_cli
 
     results = _checks(check_doc)
     ok = sum(1 for r in results if r.get("ok"))

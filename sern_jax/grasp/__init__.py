@@ -7,16 +7,18 @@ importing the package stays cheap. The path an object takes: ``objects`` (spec) 
 """
 
 __all__ = [
-    "bench",
+    "artifacts",
     "candidates",
     "context",
     "crops",
     "dataset",
     "depth",
+    "depth_native",
+    "env",
     "objects",
     "online",
+    "pretrain",
     "quality_net",
     "scene",
-    "show",
     "sim",
 ]

@@ -9,7 +9,7 @@ import pytest
 
 def _bench(*argv):
     return subprocess.run(
-        [sys.executable, "-m", "sern_jax.cli", "bench", "grasp", *argv],
+        [sys.executable, "-m", "sern_jax.commands.main", "bench", "grasp", *argv],
         capture_output=True,
         text=True,
         timeout=600,

@@ -1,5 +1,5 @@
-"""Tests for sern_jax.grasp.learn_cli (Table I rows and formatting, the learn outputs) and
-sern_jax.grasp.reproduce (its summary helpers, and an early clear error without θ0)."""
+"""Tests for sern_jax.commands.grasp_learn (Table I rows and formatting, the learn outputs) and
+sern_jax.commands.reproduce (its summary helpers, and an early clear error without θ0)."""
 
 import argparse
 import json
@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from sern_jax import io
-from sern_jax.grasp import reproduce
-from sern_jax.grasp import artifacts, learn_cli, online
+from sern_jax.commands import grasp_learn as learn_cli
+from sern_jax.commands import reproduce
+from sern_jax.grasp import artifacts, online
 
 
 def _paper_eval():

@@ -5,8 +5,9 @@ CLI flag to use (issue 9, "Real meshes" and "Misleading messages")."""
 import numpy as np
 import pytest
 
-from sern_jax import cli
-from sern_jax.grasp import learn_cli, objects
+from sern_jax.commands import grasp_learn as learn_cli
+from sern_jax.commands import main as cli
+from sern_jax.grasp import objects
 
 _PYTHON_ARGS = ("units=", "require_watertight", "max_vertices=")
 

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from sern_jax import cli, io
+from sern_jax import io
+from sern_jax.commands import main as cli
 from sern_jax.grasp import artifacts, context, objects, online
 
 # 1 object x 3 policies x 2 seeds x 2 rounds of 3 exploration + 2 evaluation grasps.
@@ -244,7 +245,7 @@ def test_regret_accounting(tiny_theta0, spec, tmp_path):
     assert "oracle" in res["timings"]
     for row in res["table"]:
         assert len(row["pseudo_regret"]) == config.rounds
-    from sern_jax.grasp import learn_cli
+    from sern_jax.commands import grasp_learn as learn_cli
     assert "Pseudo-regret per round" in learn_cli.format_table(res["table"])
     with pytest.raises(ValueError, match="regret_trials"):
         dataclasses.replace(config, regret_trials=-1)
@@ -400,7 +401,7 @@ def test_learn_cli_subprocess_one_line_no_traceback(argv, match, tmp_path):
     argv = [str(broken) if a == "BROKEN" else a for a in argv]
     t = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-m", "sern_jax.cli", "grasp", "learn", "--out",
+        [sys.executable, "-m", "sern_jax.commands.main", "grasp", "learn", "--out",
          str(tmp_path / "run"), *argv], capture_output=True, text=True, timeout=120)
     seconds = time.perf_counter() - t
     assert proc.returncode == 2, proc.stderr

@@ -1,4 +1,4 @@
-"""Tests for `sern grasp show` (sern_jax.grasp.show)."""
+"""Tests for `sern grasp show` (sern_jax.commands.grasp_show)."""
 
 import argparse
 import os
@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from sern_jax.grasp import show
+from sern_jax.commands import grasp_show as show
 
 
 def _parse(argv):
@@ -52,7 +52,7 @@ def test_show_writes_pictures_and_results(tmp_path):
     out = tmp_path / "show"
     env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
     code = (
-        "import sys; from sern_jax.cli import main; "
+        "import sys; from sern_jax.commands.main import main; "
         f"sys.exit(main(['grasp', 'show', 'small_box', '--trials', '1', '--out', {str(out)!r}]))"
     )
     proc = subprocess.run(

@@ -72,7 +72,10 @@ class ContextConfig:
         straight down at the origin (``depth.overhead_params``).
       candidates: antipodal sampler (K = ``num_candidates`` slots).
       scene: physics and solver settings of the scene (and the resting-pose drop).
-      noise: whether to add Dex-Net-style depth sensor noise.
+      noise: whether to add depth sensor noise (off by default: every shipped result is
+        noise-free); ``camera.noise_model`` picks Dex-Net-style noise (default) or a
+        RealSense D435-like model (range-dependent Gaussian noise, missing pixels filled by
+        ``depth.inpaint``).
       renderer: ``"jax"`` (``depth.render``, MJX ray casting: the GPU path; compiles once
         per scene structure, i.e. per object), ``"native"`` (``depth_native``: MuJoCo's C
         ray caster, no compile per object, the CPU path) or ``"auto"`` (native on a CPU

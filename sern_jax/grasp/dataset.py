@@ -17,6 +17,13 @@ Layout of a dataset directory::
     shard_00000.npz      objects [i*objects_per_shard, (i+1)*objects_per_shard)
     ...
     summary.json         counts and class balance, written when every shard exists
+    .sern.lock           the run-directory lock (``io.run_lock``): one writer at a time
+
+Shards are verified npz files (``io.save_npz``: zip CRCs and a SHA-256 inside). A rerun
+re-reads every existing shard: a damaged one (truncated, empty, overwritten) is moved aside to
+``shard_XXXXX.npz.damaged``, reported as ``damaged -> recomputing`` and simulated again (a
+shard is deterministic, so the recomputed file holds the same arrays). :func:`load` refuses a
+damaged shard in one line naming it.
 
 Randomness: object i is ``objects.sample_population(seed, ...)[i]``; its contexts use
 ``fold_in(fold_in(key(seed), i), CONTEXT_STREAM)`` and its trials
@@ -207,8 +214,12 @@ def _check_dir(out_dir: Path, config: DatasetConfig) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"--out {out_dir} exists and is not a directory")
     if cfg_path.exists():
-        old = io.load_json(cfg_path)
-        if old.get("fingerprint") != config.fingerprint():
+        try:
+            old = io.load_json(cfg_path)
+        except (OSError, ValueError):
+            raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete "
+                             "it") from None
+        if not isinstance(old, dict) or old.get("fingerprint") != config.fingerprint():
             raise ValueError(
                 f"{out_dir} holds a different dataset (config {old.get('config')}); "
                 "choose another --out or delete it")
@@ -224,19 +235,26 @@ def generate(
     """Generates (or resumes) D0 into ``out_dir``; returns the summary dict.
 
     Finished shards are kept: an interrupted run resumes at the first missing shard and
-    gives the same files as an uninterrupted one.
+    gives the same files as an uninterrupted one. Existing shards are verified first; a
+    damaged one is set aside and recomputed (``io.npz_unit_done``). The directory is locked
+    (``io.run_lock``) while this runs: a second process gets ``io.RunLockedError``.
     """
     out_dir = Path(out_dir)
     _check_dir(out_dir, config)
     specs = dataset_objects(config)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with io.run_lock(out_dir):
+        _check_dir(out_dir, config)  # again, under the lock
+        return _generate(config, out_dir, specs, progress, log)
+
+
+def _generate(config, out_dir: Path, specs, progress: bool, log) -> dict:
     io.save_json(out_dir / "config.json",
                  {"config": config, "fingerprint": config.fingerprint(),
                   "label": "one Bernoulli outcome per valid candidate (first trial); "
                            "successes = count over trials_per_grasp"})
     root = jax.random.key(config.seed)
     paths = shard_paths(out_dir, config)
-    todo = [i for i, p in enumerate(paths) if not p.exists()]
+    todo = [i for i, p in enumerate(paths) if not io.npz_unit_done(p, log)]
     log(f"D0: {config.num_objects} objects x {config.poses_per_object} poses x 64 "
         f"candidates ({config.max_grasps:,} slots) in {config.num_shards} shards; "
         f"{config.num_shards - len(todo)} already done")
@@ -278,15 +296,36 @@ def load(out_dir: str | Path) -> tuple[DatasetConfig, dict[str, np.ndarray]]:
     if not cfg_path.exists():
         raise ValueError(f"{out_dir} is not a dataset directory (no config.json); "
                          "make one with `sern grasp dataset --out DIR`")
-    config = DatasetConfig(**io.load_json(cfg_path)["config"])
+    try:
+        config = DatasetConfig(**io.load_json(cfg_path)["config"])
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        raise ValueError(f"{cfg_path} is unreadable or not a dataset's config "
+                         f"({type(exc).__name__}); rerun `sern grasp dataset` with the flags "
+                         "that made it") from None
     paths = shard_paths(out_dir, config)
     missing = [p.name for p in paths if not p.exists()]
     if missing:
         raise ValueError(f"{out_dir} is incomplete ({len(missing)} of {len(paths)} shards "
                          f"missing, e.g. {missing[0]}); rerun `sern grasp dataset` with the "
                          "same flags to finish it")
-    shards = [io.load_npz(p) for p in paths]
-    return config, {k: np.concatenate([s[k] for s in shards]) for k in shards[0]}
+    advice = (f"rerun `sern grasp dataset --out {out_dir}` with the same flags to recompute "
+              "it")
+    shards = []
+    for s, p in enumerate(paths):
+        shard = io.load_npz(p, advice=advice)
+        lo = s * config.objects_per_shard
+        hi = min(lo + config.objects_per_shard, config.num_objects)
+        missing = [k for k in _SHARD_KEYS if k not in shard]
+        if missing:
+            raise io.DamagedFileError(p, f"no {missing[0]!r} array", advice)
+        rows = (hi - lo) * config.poses_per_object
+        bad = [k for k in _SHARD_KEYS if shard[k].shape[:1] != (rows,)]
+        if bad:
+            raise io.DamagedFileError(
+                p, f"{bad[0]} has {shard[bad[0]].shape[0] if shard[bad[0]].ndim else 0} rows, "
+                   f"not the {rows} contexts of objects {lo}-{hi - 1}", advice)
+        shards.append(shard)
+    return config, {k: np.concatenate([s[k] for s in shards]) for k in _SHARD_KEYS}
 
 
 def summarize(out_dir: str | Path, config: DatasetConfig) -> dict:

@@ -47,6 +47,7 @@ __all__ = [
 ]
 
 HELDOUT_SEED_OFFSET = 1_000_003  # held-out population seed = D0 seed + this
+CORE_RFF = 512  # random Fourier features of the core set's k-DPP (dpp.select_core_set)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,6 +80,9 @@ class PretrainConfig:
             raise ValueError(f"seed must be an integer in [0, 2**31), got {self.seed!r}")
         if self.core_method not in ("sample", "greedy"):
             raise ValueError(f"core_method must be sample or greedy, got {self.core_method!r}")
+        if self.core_k > CORE_RFF:  # the k-DPP's lifted kernel has rank CORE_RFF
+            raise ValueError(f"core_k must be <= {CORE_RFF} (the rank of the k-DPP's random-"
+                             f"feature kernel), got {self.core_k}")
 
     def fingerprint(self, data_fingerprint: str) -> str:
         d = dataclasses.asdict(self)
@@ -287,30 +291,50 @@ def pretrain(
     Writes into ``out_dir``: ``checkpoint.npz`` (after each epoch; resumes), ``history.json``,
     ``metrics.json`` and the artefacts of :mod:`artifacts` (``theta0.msgpack``,
     ``core_set.npz``, ``manifest.json``). Returns the manifest.
-    """
-    from tqdm.auto import tqdm
 
+    D0's shards and the checkpoint are verified on load (``io.load_npz``): a damaged file is
+    refused in one line naming it. ``out_dir`` is locked (``io.run_lock``) while this runs.
+    """
     out_dir = Path(out_dir)
     t_start = time.perf_counter()
-    data_config, arrays = dataset_lib.load(data_dir)
+    data_config, arrays = dataset_lib.load(data_dir)  # every shard verified (one-line errors)
     fingerprint = config.fingerprint(data_config.fingerprint())
     ckpt = out_dir / "checkpoint.npz"
-    if ckpt.exists() and str(io.load_npz(ckpt)["fingerprint"]) != fingerprint:
+    _check_checkpoint(ckpt, fingerprint, out_dir)
+    # sizes that depend on the data, before any crop or compile
+    num_grasps = int(arrays["valid"].sum())
+    # validation split by object (every 10th object), for the training curve only
+    val = arrays["object_index"][np.nonzero(arrays["valid"])[0]] % 10 == 9
+    tr = ~val
+    if config.core_k > num_grasps:
+        raise ValueError(f"--core-k {config.core_k} exceeds D0's {num_grasps} labelled grasps")
+    if int(tr.sum()) < config.batch_size:
+        raise ValueError(f"--batch-size {config.batch_size}: D0 has {int(tr.sum())} training "
+                         "grasps, fewer than one batch")
+    with io.run_lock(out_dir):
+        _check_checkpoint(ckpt, fingerprint, out_dir)  # again, under the lock
+        return _pretrain(config, data_config, arrays, out_dir, ckpt, fingerprint, val, tr,
+                         network_config, progress, log, t_start)
+
+
+def _check_checkpoint(ckpt: Path, fingerprint: str, out_dir: Path) -> None:
+    if not ckpt.exists():
+        return
+    saved = io.load_npz(ckpt, advice="delete it to restart pretraining from epoch 0")
+    if str(saved.get("fingerprint")) != fingerprint:
         raise ValueError(f"{out_dir} holds another pretraining run; choose another --out "
                          "or delete it")
-    out_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _pretrain(config, data_config, arrays, out_dir, ckpt, fingerprint, val, tr,
+              network_config, progress, log, t_start) -> dict:
+    from tqdm.auto import tqdm
 
     t = time.perf_counter()
     image, depth, ctx, slot = crops_of(arrays)
     label = arrays["label"][ctx, slot].astype(np.float32)
-    obj = arrays["object_index"][ctx]
     log(f"D0: {len(label):,} labelled grasps from {data_config.num_objects} objects "
         f"({label.mean():.1%} successes); crops in {time.perf_counter() - t:.1f} s")
-    if config.core_k > len(label):  # fail before training, not after
-        raise ValueError(f"core set k = {config.core_k} exceeds D0's {len(label)} grasps")
-    # validation split by object (every 10th object), for the training curve only
-    val = obj % 10 == 9
-    tr = ~val
     network = qn.make_quality_network(network_config)
     normalizer = qn.fit_normalizer(image[tr], depth[tr])
     key = jax.random.key(config.seed)
@@ -320,7 +344,7 @@ def pretrain(
     step = jax.jit(qn.make_train_step(network, optimizer, config.loss))
     history, start_epoch = [], 0
     if ckpt.exists():
-        saved = io.load_npz(ckpt)
+        saved = io.load_npz(ckpt, advice="delete it to restart pretraining from epoch 0")
         params = artifacts.tree_from_arrays(saved, params, "p")
         opt_state = artifacts.tree_from_arrays(saved, opt_state, "o")
         history = json.loads(str(saved["history"]))
@@ -329,9 +353,7 @@ def pretrain(
 
     idx_tr = np.flatnonzero(tr)
     bs = config.batch_size
-    steps = len(idx_tr) // bs
-    if steps < 1:
-        raise ValueError(f"D0 has {len(idx_tr)} training grasps, fewer than one batch ({bs})")
+    steps = len(idx_tr) // bs  # >= 1: checked before the lock
     ones = np.ones(bs, np.float32)
     for epoch in range(start_epoch, config.epochs):
         t = time.perf_counter()

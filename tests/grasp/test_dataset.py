@@ -119,3 +119,58 @@ def test_bad_config_names_the_field(field, value):
 def test_load_of_a_non_dataset_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="not a dataset directory"):
         dataset.load(tmp_path)
+
+
+def _damage(path, how):
+    data = path.read_bytes()
+    path.write_bytes({"truncate": data[: len(data) // 2], "empty": b"",
+                      "random": np.random.default_rng(0).bytes(len(data))}[how])
+
+
+@pytest.mark.parametrize("how", ["truncate", "empty", "random"])
+def test_damaged_shard_is_refused_by_load_and_recomputed_by_generate(tiny_dataset, tmp_path,
+                                                                      how):
+    """A damaged shard is never counted as done: load names it in one line, a rerun of
+    generate sets it aside and recomputes the same arrays (issue 16)."""
+    from sern_jax import io
+
+    config, first = tiny_dataset
+    d0 = tmp_path / "d0"
+    shutil.copytree(first, d0)
+    shard = d0 / "shard_00001.npz"
+    _damage(shard, how)
+    with pytest.raises(io.DamagedFileError) as info:
+        dataset.load(d0)
+    msg = str(info.value)
+    assert "\n" not in msg and str(shard) in msg and "sern grasp dataset" in msg
+    lines = []
+    dataset.generate(config, d0, progress=False, log=lines.append)
+    assert any("shard_00001.npz: damaged" in line and "recomputing" in line for line in lines)
+    assert any("1 already done" in line for line in lines)
+    assert (d0 / "shard_00001.npz.damaged").exists()
+    _assert_same_shards(first, d0, config)
+    dataset.load(d0)
+
+
+def test_shard_with_wrong_rows_is_refused(tiny_dataset, tmp_path):
+    """A well-formed shard holding another shard's contexts (e.g. copied over it)."""
+    from sern_jax import io
+
+    config, first = tiny_dataset
+    d0 = tmp_path / "d0"
+    shutil.copytree(first, d0)
+    arrays = io.load_npz(d0 / "shard_00000.npz")
+    io.save_npz(d0 / "shard_00000.npz", **{k: v[:1] for k, v in arrays.items()})
+    with pytest.raises(io.DamagedFileError, match="rows"):
+        dataset.load(d0)
+
+
+def test_dataset_run_directory_is_locked(tiny_dataset, tmp_path):
+    from sern_jax import io
+
+    config, first = tiny_dataset
+    d0 = tmp_path / "d0"
+    shutil.copytree(first, d0)
+    with io.run_lock(d0, command="another dataset run"), \
+            pytest.raises(io.RunLockedError, match="another dataset run"):
+        dataset.generate(config, d0, progress=False, log=lambda *_: None)

@@ -70,7 +70,7 @@ def test_metrics_degenerate_inputs_give_nan_without_warnings():
 
 @pytest.mark.parametrize("field, value", [
     ("epochs", 0), ("batch_size", True), ("learning_rate", 0.0), ("loss", "mse"),
-    ("core_k", 0), ("core_method", "map"), ("heldout_trials", -2),
+    ("core_k", 0), ("core_k", 513), ("core_method", "map"), ("heldout_trials", -2),
 ])
 def test_bad_config_names_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -166,11 +166,55 @@ def test_pretrain_refuses_another_run_in_same_dir(pretrained):
 def test_pretrain_core_k_larger_than_data_is_refused(tiny_dataset, tmp_path):
     _, data_dir = tiny_dataset
     config = pretrain.PretrainConfig(epochs=1, batch_size=256, heldout_objects=1,
-                                     heldout_poses=1, heldout_trials=1, core_k=10_000)
+                                     heldout_poses=1, heldout_trials=1, core_k=500)
     with pytest.raises(ValueError, match="exceeds"):
         pretrain.pretrain(data_dir, config, tmp_path / "out", progress=False,
                           log=lambda *_: None)
-    assert not (tmp_path / "out" / "checkpoint.npz").exists()  # refused before training
+    assert not (tmp_path / "out").exists()  # refused before anything is written
+
+
+def test_pretrain_batch_larger_than_data_is_refused_before_writing(tiny_dataset, tmp_path):
+    _, data_dir = tiny_dataset
+    config = pretrain.PretrainConfig(epochs=1, batch_size=100_000, heldout_objects=1,
+                                     heldout_poses=1, heldout_trials=1, core_k=4)
+    with pytest.raises(ValueError, match="--batch-size 100000"):
+        pretrain.pretrain(data_dir, config, tmp_path / "out", progress=False,
+                          log=lambda *_: None)
+    assert not (tmp_path / "out").exists()
+
+
+def _damage(path, how):
+    data = path.read_bytes()
+    path.write_bytes({"truncate": data[: len(data) // 2], "empty": b"",
+                      "random": np.random.default_rng(0).bytes(len(data))}[how])
+
+
+@pytest.mark.parametrize("how", ["truncate", "empty", "random"])
+def test_damaged_checkpoint_is_one_line_naming_it(pretrained, tmp_path, how):
+    data_dir, _, _, aside = pretrained
+    out = tmp_path / "out"
+    out.mkdir()
+    shutil.copy(aside, out / "checkpoint.npz")
+    _damage(out / "checkpoint.npz", how)
+    with pytest.raises(io.DamagedFileError) as info:
+        pretrain.pretrain(data_dir, CONFIG, out, progress=False, log=lambda *_: None)
+    msg = str(info.value)
+    assert "\n" not in msg and str(out / "checkpoint.npz") in msg and "delete it" in msg
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint.npz"]  # nothing written
+
+
+@pytest.mark.parametrize("how", ["truncate", "empty", "random"])
+def test_pretrain_on_damaged_data_names_the_shard(tiny_dataset, tmp_path, how):
+    _, first = tiny_dataset
+    data_dir = tmp_path / "d0"
+    shutil.copytree(first, data_dir)
+    _damage(data_dir / "shard_00000.npz", how)
+    with pytest.raises(io.DamagedFileError) as info:
+        pretrain.pretrain(data_dir, CONFIG, tmp_path / "out", progress=False,
+                          log=lambda *_: None)
+    msg = str(info.value)
+    assert "\n" not in msg and "shard_00000.npz" in msg and "sern grasp dataset" in msg
+    assert not (tmp_path / "out").exists()
 
 
 # ----------------------------------------------------------------------------- screen

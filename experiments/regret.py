@@ -344,7 +344,8 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             raise ValueError(f"--out {run_dir}: cannot write there ({exc.strerror or exc})") \
                 from None
         try:
-            return _run(exp, triples, run_dir, mesh, progress)
+            with io.run_lock(run_dir):  # one writer per run directory (issue 16)
+                return _run(exp, triples, run_dir, mesh, progress, log)
         except Exception:
             chunk_dir = run_dir / "chunks"
             if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
@@ -352,13 +353,17 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             raise
 
 
-def _run(exp, triples, run_dir: Path, mesh, progress: bool) -> Path:
+def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print) -> Path:
     from sern_jax import executor
     from sern_jax import simulate as sim
 
     (run_dir / "figures").mkdir(exist_ok=True)
     chunk_dir = run_dir / "chunks"
     chunk_dir.mkdir(exist_ok=True)
+    # saved chunks are verified: a damaged one is set aside (<name>.damaged, logged
+    # "damaged -> recomputing") and its seeds are computed again (they are deterministic)
+    for path in sorted(chunk_dir.glob("*.npz")):
+        io.npz_unit_done(path, log)
     io.save_json(run_dir / "config.json",
                  {"experiment": exp, "fingerprint": exp.fingerprint(),
                   "checkpoints": sim.checkpoint_times(triples[0][1])})

@@ -168,3 +168,32 @@ def test_tiny_normal_alpha_gives_finite_results(tmp_path):
                      "--alpha", "1e-37", "--out", str(out)]) == 0
     res = io.load_npz(out / "results.npz")
     assert np.isfinite(res["softmax__regret_rb"]).all()
+
+
+@pytest.mark.parametrize("how", ["truncate", "empty", "random"])
+def test_damaged_seed_chunk_is_recomputed(run_dir, tmp_path, how, capsys):
+    """A damaged chunk file is set aside and its seeds computed again: the same results as
+    the run that never lost it (issue 16)."""
+    out = tmp_path / "damaged"
+    (out / "chunks").mkdir(parents=True)
+    for path in sorted((run_dir / "chunks").glob("*.npz")):
+        (out / "chunks" / path.name).write_bytes(path.read_bytes())
+    (out / "config.json").write_text((run_dir / "config.json").read_text())
+    victim = sorted((out / "chunks").glob("softmax__*.npz"))[1]
+    data = victim.read_bytes()
+    victim.write_bytes({"truncate": data[: len(data) // 2], "empty": b"",
+                        "random": np.random.default_rng(0).bytes(len(data))}[how])
+    assert cli.main(ARGS + ["--out", str(out), "--no-figures"]) == 0
+    assert f"{victim}: damaged" in capsys.readouterr().out
+    assert victim.with_name(victim.name + ".damaged").exists()
+    a = io.load_npz(run_dir / "results.npz")
+    b = io.load_npz(out / "results.npz")
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_regret_run_directory_is_locked(run_dir, capsys):
+    with io.run_lock(run_dir, command="sern regret (another)"):
+        assert cli.main(ARGS + ["--out", str(run_dir), "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "in use by" in err[0] and "sern regret (another)" in err[0]

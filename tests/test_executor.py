@@ -107,6 +107,8 @@ def test_default_chunk_size_bounds_one_call():
     assert calls > 1 and chunk * calls - 10_000 < calls
     # one share per concurrent caller
     assert executor.default_chunk_size(CFG, 1000, backend="cpu", workers=2) == 500
+    # summaries copy nothing per seed: on CPU the same bound, the accelerator's is not smaller
+    assert executor.default_chunk_size(big, 10_000, backend="cpu", summary=True) == chunk
 
 
 SHARD_SCRIPT = textwrap.dedent("""
@@ -121,7 +123,14 @@ SHARD_SCRIPT = textwrap.dedent("""
     plain = executor.run_seeds(cfg, params, seed=3, num_seeds=103)
     executor.use_pinned_host = lambda mesh: True  # the accelerator transfer path, on the CPU mesh
     pinned = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40)
+    summ = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40,
+                              summary=True)  # reduced on the mesh, merged over 3 calls
     print(json.dumps({"devices": len(jax.devices()),
+                      "summary_hist_equal": bool(np.array_equal(
+                          summ.counts.hist.sum(-1), np.full(summ.counts.hist.shape[:-1], 103))
+                          and np.array_equal(summ.counts.min, plain.counts.min(0))),
+                      "summary_mean_maxdiff": float(np.abs(
+                          summ.regret_rb.mean - plain.regret_rb.astype(float).mean(0)).max()),
                       "counts_equal": bool(np.array_equal(sharded.counts, plain.counts)),
                       "pinned_equal": bool(np.array_equal(pinned.counts, sharded.counts)
                                            and np.array_equal(pinned.regret_rb, sharded.regret_rb)),
@@ -139,6 +148,7 @@ def test_sharded_equals_unsharded():
     assert report["devices"] == 4
     assert report["counts_equal"] and report["pinned_equal"]
     assert report["regret_maxdiff"] <= 1e-4
+    assert report["summary_hist_equal"] and report["summary_mean_maxdiff"] <= 1e-4
 
 
 MEM_SCRIPT = textwrap.dedent("""

@@ -46,7 +46,7 @@ import optax
 
 from sern_jax import io
 from sern_jax import policies as pol
-from sern_jax import schedules
+from sern_jax import schedules, stats
 from sern_jax.grasp import artifacts
 from sern_jax.grasp import candidates as cand_lib
 from sern_jax.grasp import context as context_lib
@@ -305,12 +305,18 @@ def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.nda
                lowvar_eval: np.ndarray | None = None,
                pseudo_regret: np.ndarray | None = None) -> list[dict]:
     """Table I rows: per object and policy, round 1..R success mean ± std over seeds (%),
-    Max over rounds and Imprv = (r_R - r_1)/r_1 (the paper's definition)."""
+    Max over rounds and Imprv = (r_R - r_1)/r_1 (the paper's definition).
+
+    ``std`` is the population standard deviation over seeds (ddof 0, as it always was);
+    ``sd`` is the sample standard deviation (ddof 1) and ``se`` = sd / √S, the statistic
+    the paper's Table I prints in parentheses (``experiments/paper_table1.py``); None
+    with one seed."""
     rows = []
     for o, name in enumerate(objects):
         for q, policy in enumerate(policies):
             x = 100.0 * paper_eval[1:, o, q, :]  # [R, S]
             mean, std = x.mean(1), x.std(1)
+            spread = stats.t_interval(x, axis=1)  # sd (ddof 1) and se over the seeds
             r1, rr = mean[0], mean[-1]
             row = {
                 "object": name,
@@ -318,6 +324,8 @@ def table_rows(objects: list[str], policies: tuple[str, ...], paper_eval: np.nda
                 "theta0": float(100.0 * paper_eval[0, o, q, :].mean()),
                 "rounds": [float(v) for v in mean],
                 "std": [float(v) for v in std],
+                "sd": [float(v) if np.isfinite(v) else None for v in spread.sd],
+                "se": [float(v) if np.isfinite(v) else None for v in spread.se],
                 "max": float(mean.max()),
                 "imprv": float((rr - r1) / r1) if r1 > 0 else None,
             }

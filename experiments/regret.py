@@ -49,12 +49,17 @@ class RegretExperiment:
     chunk_size: int = 1000
     float64: bool = False
     devices: int = 1
+    # False: keep on-device summaries over seeds (executor.run_seeds(summary=True): means,
+    # variances, min/max, histogram quantiles) instead of per-seed arrays (issue 20)
+    per_seed: bool = True
 
     def fingerprint(self) -> str:
         """Hash of the fields that change results (not chunk size or devices)."""
         d = dataclasses.asdict(self)
         d.pop("chunk_size")
         d.pop("devices")
+        if d["per_seed"]:  # the default keeps the fingerprints of runs made before the flag
+            d.pop("per_seed")
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -152,7 +157,9 @@ def _estimate(exp: RegretExperiment, triples) -> dict:
     out_bytes = 0
     seed_rounds_s = 0.0
     for _, cfg, params in triples:
-        out_bytes += exp.num_seeds * executor.bytes_per_seed(cfg)
+        # summaries hold one chunk's outputs at a time, and save kilobytes per chunk
+        kept = exp.num_seeds if exp.per_seed else min(exp.num_seeds, exp.chunk_size)
+        out_bytes += kept * executor.bytes_per_seed(cfg)
         fast = fast_softmax.supports(cfg, params)
         rate = _FAST_RATE if fast else _GENERAL_RATE * min(1.0, 10.0 / exp.num_arms)
         seed_rounds_s += exp.num_seeds * exp.horizon / rate
@@ -372,6 +379,8 @@ def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print) -> Path:
     # one fixed call shape for every saved chunk (the last, smaller one too), split so that
     # each core runs its own calls
     per_call = math.ceil(chunk / executor.concurrent_calls(mesh))
+    if not exp.per_seed:
+        return _run_summaries(exp, triples, run_dir, mesh, progress, ranges, per_call)
     bar = _progress_bar(len(triples) * exp.num_seeds, progress)
     for policy, cfg, params in triples:
         for a, b in ranges:
@@ -405,6 +414,94 @@ def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print) -> Path:
     return run_dir
 
 
+def _summary_chunk_name(policy: str, start: int, stop: int) -> str:
+    return f"{policy}__summary_{start:012d}-{stop:012d}.npz"
+
+
+def _run_summaries(exp, triples, run_dir: Path, mesh, progress: bool, ranges,
+                   per_call: int) -> Path:
+    """``--no-per-seed``: each chunk of seeds is reduced on the device and saved as its
+    summary (kilobytes); a rerun reuses the chunks of exactly the same seed ranges (another
+    --chunk-size recomputes), and the chunks merge exactly in seed order (Chan et al.)."""
+    from sern_jax import executor
+    from sern_jax import simulate as sim
+
+    chunk_dir = run_dir / "chunks"
+    bar = _progress_bar(len(triples) * exp.num_seeds, progress)
+    for policy, cfg, params in triples:
+        for a, b in ranges:
+            path = chunk_dir / _summary_chunk_name(policy, a, b)
+            if not path.exists():
+                start_time = time.perf_counter()
+                summ = executor.run_seeds(cfg, params, exp.seed, b - a, first_seed=a,
+                                          chunk_size=per_call, mesh=mesh, summary=True)
+                io.save_npz(path, wall_s=np.float64(time.perf_counter() - start_time),
+                            **executor.summary_arrays(summ))
+            bar.update(b - a)
+    bar.close()
+    merged, summaries, timings = {}, {}, {}
+    for policy, _, _ in triples:
+        parts, timings[policy] = [], 0.0
+        for a, b in ranges:
+            data = io.load_npz(chunk_dir / _summary_chunk_name(policy, a, b))
+            part = executor.summary_from_arrays(data)
+            if part.num_seeds != b - a:
+                raise ValueError(f"{_summary_chunk_name(policy, a, b)} summarises "
+                                 f"{part.num_seeds} seeds, not {b - a}; delete it and rerun")
+            parts.append(part)
+            timings[policy] += float(data["wall_s"]) if "wall_s" in data else 0.0
+        summaries[policy] = executor.merge_summaries(parts)
+        merged.update(executor.summary_arrays(summaries[policy], prefix=f"{policy}__"))
+    merged["t"] = sim.checkpoint_times(triples[0][1])
+    merged["means"] = np.asarray(triples[0][2].problem.means)
+    io.save_npz(run_dir / "results.npz", **merged)
+    meta = io.run_metadata(wall_seconds_per_policy=timings)
+    io.save_json(run_dir / "metadata.json", meta)
+    summary = summarise_summaries(exp, summaries, merged["t"])
+    io.save_json(run_dir / "summary.json", summary)
+    _write_report(run_dir, exp, summary, meta)
+    return run_dir
+
+
+def summarise_summaries(exp: RegretExperiment, summaries: dict, t: np.ndarray) -> dict:
+    """:func:`summarise` from on-device summaries (``--no-per-seed``): the same fields, the
+    same Student-t interval (from the exact mean and variance); the slope of the mean curve
+    has no interval (the bootstrap needs per-seed curves: ``lo``/``hi`` are NaN); adds the
+    final regret's quantiles from the histograms with their guaranteed brackets."""
+    from sern_jax import executor, schedules, stats, theory
+
+    t = np.asarray(t, np.float64)
+    alpha = float(schedules.alpha_of_horizon(exp.schedule, exp.horizon, exp.alpha0, exp.p))
+    out = {"horizon": exp.horizon, "num_seeds": exp.num_seeds, "per_seed": False,
+           "policies": {},
+           "theorem1": {"alpha": alpha, "c": float(theory.thm1_c(alpha, exp.num_arms)),
+                        "pi_min": float(theory.thm1_pi_min(alpha, exp.num_arms))}}
+    for policy in exp.policies:
+        s = summaries[policy]
+        rb = s.regret_rb
+        mean = float(rb.mean[-1])
+        half = float(stats.t_half_width(float(rb.sd[-1]), rb.count, 0.95))
+        curve = rb.mean.astype(np.float64)
+        slope = fit_slope(t, curve[None, :], t_min=max(1.0, exp.horizon / 10), num_boot=0)
+        quantiles = {}
+        for q in executor.SUMMARY_QUANTILES:
+            got = rb.quantile(q)
+            quantiles[str(q)] = {"estimate": float(got.estimate[-1]), "lo": float(got.lo[-1]),
+                                 "hi": float(got.hi[-1])}
+        out["policies"][policy] = {
+            "regret_T_mean": mean,
+            "regret_T_ci95": [mean - half, mean + half],
+            "regret_T_realised_mean": float(s.regret.mean[-1]),
+            "regret_paper_T_mean": float(s.regret_rb_paper.mean[-1]),
+            "regret_over_T": mean / exp.horizon,
+            "slope_last_decade": slope,
+            "min_prob": float(s.min_prob.min[-1]),
+            "regret_T_sd": float(rb.sd[-1]),
+            "regret_T_quantiles": quantiles,
+        }
+    return out
+
+
 def fit_slope(t: np.ndarray, curves: np.ndarray, t_min: float, num_boot: int = 200,
               seed: int = 0) -> dict:
     """Log–log OLS slope of the seed-mean regret over t ≥ t_min, with a seed-bootstrap 95% CI."""
@@ -417,6 +514,9 @@ def fit_slope(t: np.ndarray, curves: np.ndarray, t_min: float, num_boot: int = 2
         y = np.log(np.maximum(mean_curve[mask], 1e-12))
         return float(np.polyfit(lt, y, 1)[0])
 
+    if num_boot == 0:  # no per-seed curves: no interval
+        return {"slope": slope(curves.mean(0)), "lo": float("nan"), "hi": float("nan"),
+                "t_min": float(t_min)}
     rng = np.random.default_rng(seed)
     s = curves.shape[0]
     boots = [slope(curves[rng.integers(0, s, s)].mean(0)) for _ in range(num_boot)]
@@ -473,8 +573,19 @@ def _write_report(run_dir: Path, exp: RegretExperiment, summary: dict, meta: dic
             f"| {policy} | {s['regret_T_mean']:.2f} | [{s['regret_T_ci95'][0]:.2f}, "
             f"{s['regret_T_ci95'][1]:.2f}] | {s['regret_over_T']:.4f} | "
             f"{s['regret_paper_T_mean']:.2f} | {sl['slope']:.3f} [{sl['lo']:.3f}, {sl['hi']:.3f}] |")
-    lines += ["", "Figures: `figures/regret.png` (regret vs T, log–log), "
-              "`figures/exploration.png` (N_a(t)/t against the floor c = e^{-1/α}/K).", "",
+    if summary.get("per_seed") is False:
+        lines += ["", "Run with --no-per-seed: statistics over seeds were reduced on the device "
+                  "(means and variances exact up to float rounding); the slope has no interval "
+                  "(its bootstrap needs per-seed curves) and no figures are drawn. Quantiles of "
+                  "R_T (histogram estimate [guaranteed bracket of the exact quantile]): "]
+        for policy, s in summary["policies"].items():
+            qs = ", ".join(f"q{float(q):g}: {v['estimate']:.2f} [{v['lo']:.2f}, {v['hi']:.2f}]"
+                           for q, v in s["regret_T_quantiles"].items())
+            lines.append(f"- {policy}: {qs}")
+    else:
+        lines += ["", "Figures: `figures/regret.png` (regret vs T, log–log), "
+                  "`figures/exploration.png` (N_a(t)/t against the floor c = e^{-1/α}/K)."]
+    lines += ["",
               f"Made with sern_jax {meta['versions'].get('sern_jax')}, jax "
               f"{meta['versions'].get('jax')}, commit {meta.get('git_commit')}."]
     (run_dir / "report.md").write_text("\n".join(lines) + "\n")

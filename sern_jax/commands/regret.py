@@ -73,6 +73,10 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="run directory (default runs/regret-<fingerprint>)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--no-per-seed", dest="per_seed", action="store_false",
+                   help="keep statistics over seeds reduced on the device (means, variances, "
+                        "min/max, histogram quantiles: kilobytes per chunk) instead of "
+                        "per-seed arrays; for very many seeds (no slope interval, no figures)")
     p.set_defaults(func=functools.partial(run, defaults=defaults, run_experiment=run_experiment,
                                           make_figures=make_figures))
     return p
@@ -87,11 +91,14 @@ def run(args, *, defaults: Any, run_experiment: Callable,
         num_contexts=args.contexts, gap=args.gap, horizon=args.horizon, num_seeds=args.seeds,
         schedule=args.schedule, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
         seed=args.seed, num_checkpoints=args.checkpoints, chunk_size=args.chunk_size,
-        float64=args.float64, devices=args.devices)
+        float64=args.float64, devices=args.devices,
+        **({"per_seed": False} if not args.per_seed else {}))
     out = Path(args.out) if args.out else Path("runs") / f"regret-{exp.fingerprint()}"
     run_dir = run_experiment(exp, out, progress=not args.no_progress)
     print((run_dir / "report.md").read_text())
-    if not args.no_figures and make_figures is not None:
+    if not args.per_seed and not args.no_figures:
+        print("figures need per-seed arrays: none drawn with --no-per-seed")
+    elif not args.no_figures and make_figures is not None:
         for path in make_figures(run_dir):
             print(f"wrote {path}")
     print(f"run directory: {run_dir}")

@@ -1,0 +1,102 @@
+"""The neural runner: jit(vmap(scan)) over seeds of the learners of sern_jax.learners on
+exact-reward problems. Batched equals unbatched, seed i alone equals seed i among many, an
+exact-oracle SERN reproduces the tabular engine's K = 2 closed form, bad input raises before
+compiling. Tiny networks and horizons (2 shared cores)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sern_jax import contextual_problems as cp
+from sern_jax import networks
+from sern_jax import neural_runner as nr
+from sern_jax import simulate as sim
+from sern_jax.learners import base, registry
+
+T, E = 60, 10
+
+
+@pytest.fixture(scope="module")
+def wheel_sern():
+    problem = cp.wheel(0.5)
+    model = networks.mlp_model(5, 2, (8,))
+    train = base.TrainConfig(horizon=T, fit_steps=3, batch_size=8, learning_rate=1e-2)
+    learner = registry.make("sern", model, train, {"alpha": 0.05})
+    cfg = nr.NeuralRunConfig(horizon=T, update_every=E, num_checkpoints=4)
+    return nr.make_run(cfg, problem, learner, model), cfg
+
+
+def test_batched_equals_unbatched_and_seed_alone_equals_seed_among_many(wheel_sern):
+    run, cfg = wheel_sern
+    many = nr.run_seeds(run, seed=7, num_seeds=6, chunk_size=6, workers=1)
+    assert many.regret.shape == (6, nr.checkpoint_times(cfg).size)
+    # seed-diversity: six seeds, six trajectories
+    assert len({tuple(np.round(r, 4)) for r in many.regret_rb}) == 6
+    alone = nr.run_seeds(run, seed=7, num_seeds=2, first_seed=3, chunk_size=6, workers=1)
+    single = jax.jit(run)(sim.seed_keys(jax.random.key(7), 1, 4)[0])  # unbatched seed 4
+    np.testing.assert_array_equal(alone.counts, many.counts[3:5])
+    np.testing.assert_array_equal(np.asarray(single.counts), many.counts[4])
+    for field in ("regret", "regret_paper", "regret_rb", "regret_rb_paper", "min_prob"):
+        np.testing.assert_allclose(getattr(alone, field), getattr(many, field)[3:5],
+                                   rtol=1e-6, atol=1e-6, err_msg=field)
+        np.testing.assert_allclose(np.asarray(getattr(single, field)),
+                                   getattr(many, field)[4], rtol=1e-5, atol=1e-5,
+                                   err_msg=field)
+
+
+def test_common_random_numbers_and_uniform_regret():
+    # uniform's expected per-round regret on the wheel is closed form: outside the disc
+    # 50 - (50 + 3 + 1.2)/5, inside 1.2 - (4 + 1.2)/5; P(outside) = 1 - δ²
+    delta = 0.7
+    problem = cp.wheel(delta)
+    model = networks.mlp_model(5, 2, (4,))
+    cfg = nr.NeuralRunConfig(horizon=50, update_every=50, num_checkpoints=1)
+    out = nr.run_seeds(nr.make_run(cfg, problem, nr.uniform_learner(5), model), 0, 400,
+                       workers=1)
+    per_round = (1 - delta**2) * (50 - 54.2 / 5) + delta**2 * (1.2 - 5.2 / 5)
+    r = out.regret_rb[:, -1].astype(np.float64)
+    assert abs(r.mean() - 50 * per_round) <= 5 * r.std() / np.sqrt(r.size)
+    np.testing.assert_allclose(out.min_prob, 0.2, rtol=1e-6)
+
+
+@pytest.mark.parametrize("delta_gap", [0.3])
+def test_exact_oracle_sern_log_reproduces_the_k2_closed_form(delta_gap):
+    # audit §3.10 / tests/test_simulate.py: K = 2, r̂ = r, α = α0/ln(T^p):
+    # R_T = Δ T / (1 + T^{pΔ/α0}), here through the learner interface and the neural runner
+    horizon, alpha0, p = 100, 0.5, 0.3
+    problem = cp.finite_from_table([[0.9, 0.9 - delta_gap]], [[1.0]])
+    model = networks.oracle_model(problem)
+    train = base.TrainConfig(horizon=horizon, fit_steps=1, batch_size=4)
+    learner = registry.make("sern_log", model, train, {"alpha0": alpha0, "p": p})
+    cfg = nr.NeuralRunConfig(horizon=horizon, update_every=10, num_checkpoints=3)
+    out = nr.run_seeds(nr.make_run(cfg, problem, learner, model), 0, 3, workers=1)
+    closed = delta_gap * horizon / (1.0 + horizon ** (p * delta_gap / alpha0))
+    np.testing.assert_allclose(out.regret_rb[:, -1], closed, rtol=2e-5)
+    np.testing.assert_allclose(out.regret_rb_paper[:, -1], closed, rtol=2e-5)
+    # ... and the tabular engine's exact-oracle run gives the same number
+    scfg = sim.RunConfig(policy="softmax", estimator="exact", schedule="log", num_arms=2,
+                         horizon=horizon, num_checkpoints=3)
+    sp = sim.default_params(scfg, sim.prob_lib.bernoulli([0.9, 0.9 - delta_gap]),
+                            alpha0=alpha0, p=p)
+    tab = jax.jit(sim.make_run(scfg))(jax.random.key(0), sp)
+    np.testing.assert_allclose(out.regret_rb[0, -1], np.asarray(tab.regret_rb)[-1], rtol=2e-5)
+    # Theorem 1's floor holds exactly: min π = 1/(1 + e^{Δ/α})
+    alpha = alpha0 / np.log(horizon ** p)
+    np.testing.assert_allclose(out.min_prob[:, -1], 1 / (1 + np.exp(delta_gap / alpha)),
+                               rtol=1e-5)
+
+
+def test_bad_input_raises_before_compiling():
+    problem = cp.wheel(0.5)
+    model = networks.mlp_model(5, 2, (4,))
+    train = base.TrainConfig(horizon=40, fit_steps=1, batch_size=4)
+    learner = registry.make("greedy", model, train)
+    with pytest.raises(ValueError, match="--update-every"):
+        nr.make_run(nr.NeuralRunConfig(horizon=45, update_every=10), problem, learner, model)
+    with pytest.raises(ValueError, match="--horizon"):  # more rounds than the buffer holds
+        nr.make_run(nr.NeuralRunConfig(horizon=50, update_every=10), problem, learner, model)
+    with pytest.raises(ValueError, match="d \\+ K"):  # a network for another context shape
+        wrong = networks.mlp_model(5, 3, (4,))
+        nr.make_run(nr.NeuralRunConfig(horizon=40, update_every=10), problem,
+                    registry.make("greedy", wrong, train), wrong)

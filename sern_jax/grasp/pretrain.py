@@ -43,6 +43,8 @@ __all__ = [
     "classification_metrics",
     "HELDOUT_SEED_OFFSET",
     "HARD_RULE",
+    "is_hard",
+    "best_candidate_estimates",
     "screen",
 ]
 
@@ -201,15 +203,72 @@ def _features(network, params, image, depth, chunk: int = 4096) -> np.ndarray:
     return _predict(network, params, image, depth, chunk, what="features")
 
 
+FRESH_STREAM = 2  # fold_in id (beside dataset's CONTEXT / TRIAL streams): fresh trials
+
+
+def _fresh_best(key, spec, lc, num_trials, num_fresh, backend):
+    """[P] success frequency of each pose's best candidate (argmax of ``lc``'s
+    frequencies; the first of ties) over ``num_fresh`` new trials, independent of the
+    trials that chose it (noise ``fold_in(key, FRESH_STREAM)``); NaN without a valid one."""
+    from sern_jax.grasp import context as context_lib
+    from sern_jax.grasp import sim as sim_lib
+
+    has = lc.valid.any(1)
+    out = np.full(len(has), np.nan)
+    if not has.any():
+        return out
+    pick = np.argmax(np.where(lc.valid, lc.successes, -1), axis=1)
+    p_i = np.flatnonzero(has)
+    model = context_lib.scene_model(spec, context_lib.ContextConfig(renderer="native"))
+    simulator = sim_lib.GraspSimulator(model, backend=backend)
+    noise = sim_lib.sample_noise(jax.random.fold_in(key, FRESH_STREAM),
+                                 len(p_i) * num_fresh, simulator.config)
+    res = simulator.run_trials(
+        np.repeat(np.asarray(lc.grasps, np.float64)[p_i, pick[p_i]], num_fresh, axis=0),
+        noise, object_pose=np.repeat(np.asarray(lc.pose)[p_i], num_fresh, axis=0))
+    out[p_i] = res.success.reshape(len(p_i), num_fresh).mean(1)
+    return out
+
+
+def best_candidate_estimates(select, valid, fresh) -> dict:
+    """The best candidate's success, biased and debiased, averaged over poses.
+
+    Args:
+      select: [P, K] success frequencies of the screening trials.
+      valid: [P, K] bool.
+      fresh: [P] success frequency of each pose's chosen best candidate (the argmax of
+        ``select``) over trials independent of ``select`` (NaN: no valid candidate).
+
+    Returns:
+      ``best_success``: mean over poses of max_k select (biased upward: the largest of K
+      noisy frequencies); ``best_success_fresh``: mean of ``fresh`` (unbiased for the
+      chosen candidate's true success, which is at most the best's).
+    """
+    select = np.where(valid, select, -1.0)
+    return {"best_success": float(select.max(1).mean()),
+            "best_success_fresh": float(np.nanmean(fresh)) if np.isfinite(fresh).any()
+            else 0.0}
+
+
+def is_hard(row: dict) -> bool:
+    """The hard-set rule on a screen row: θ0's greedy success <= 60 % and the chosen best
+    candidate's success on fresh trials >= 80 % (``best_success`` where a row predates the
+    fresh trials)."""
+    best = row.get("best_success_fresh", row["best_success"])
+    return bool(row["greedy_success"] <= HARD_RULE["max_greedy_success"]
+                and best >= HARD_RULE["min_best_success"])
+
+
 def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backend,
-                      progress, desc):
-    """Predictions against outcomes on ``specs``: (probs, labels, freqs, per-object rows)."""
+                      progress, desc, fresh_trials: int = 0):
+    """Predictions against outcomes on ``specs``: (probs, labels, freqs, per-object rows).
+    ``fresh_trials`` > 0 values each pose's best candidate on that many new trials."""
     from tqdm.auto import tqdm
 
     probs, labels, freqs, per_object = [], [], [], []
     for i, spec in enumerate(tqdm(specs, desc=desc, unit="obj", disable=not progress)):
-        lc = dataset_lib.label_contexts(jax.random.fold_in(root, i), spec, num_poses,
-                                        num_trials, backend)
+        key_i = jax.random.fold_in(root, i)
+        lc = dataset_lib.label_contexts(key_i, spec, num_poses, num_trials, backend)
         arrays = {f: getattr(lc, f) for f in ("depth", "center_px", "angle_px",
                                                "grasp_depth", "valid")}
         image, depth, ctx, slot = crops_of(arrays)
@@ -223,7 +282,7 @@ def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backe
         greedy = np.argmax(score, axis=1)
         freq_all = np.where(lc.valid, lc.successes / num_trials, -1.0)
         rows = np.arange(len(greedy))
-        per_object.append({
+        row = {
             "object": spec.name,
             "greedy_success": float(freq_all[rows, greedy].mean()),
             "best_success": float(freq_all.max(1).mean()),
@@ -233,7 +292,14 @@ def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backe
             "valid_per_pose": float(lc.valid.sum(1).mean()),
             "poses": int(num_poses),
             "trials": int(num_trials),
-        })
+        }
+        if fresh_trials:
+            fresh = _fresh_best(key_i, spec, lc, num_trials, fresh_trials, backend)
+            row.update(best_candidate_estimates(lc.successes / num_trials, lc.valid, fresh))
+            row["fresh_trials"] = int(fresh_trials)
+            row["best_fresh_per_pose"] = [None if not np.isfinite(v) else float(v)
+                                          for v in fresh]
+        per_object.append(row)
     return probs, labels, freqs, per_object
 
 
@@ -256,11 +322,13 @@ def evaluate(network, params, data_seed: int, config: PretrainConfig,
     return metrics
 
 
-HARD_RULE = {"max_greedy_success": 0.6, "min_best_success": 0.8}
+HARD_RULE = {"max_greedy_success": 0.6, "min_best_success": 0.8,
+             "best_valued_on": "fresh trials independent of those that chose it"}
 
 
 def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, seed: int = 0,
-           backend: str = "native", progress: bool = True) -> list[dict]:
+           backend: str = "native", progress: bool = True,
+           fresh_trials: int | None = None) -> list[dict]:
     """The hard-set rule on each object: θ0's greedy success and the best candidate's.
 
     An object is *hard* (``row["hard"]``) when, averaged over ``num_poses`` random resting
@@ -268,12 +336,20 @@ def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, see
     candidates succeeds at least 80 % of the time (success frequencies over ``num_trials``
     trials): θ0 grasps it poorly and there is something to learn. This is how the paper
     picked its meshes ("hardly grasped by the pretrained model"), made a stated rule.
+
+    The best candidate is chosen on the screening trials and valued on ``fresh_trials``
+    new, independent trials (default: as many as ``num_trials``): the maximum of 64 noisy
+    frequencies is biased upward (64 candidates of true success 0.4 measured by 8 trials
+    each show a maximum of about 0.8). ``best_success`` keeps the biased maximum for
+    comparison; the rule (:func:`is_hard`) uses ``best_success_fresh``.
     """
+    fresh = num_trials if fresh_trials is None else fresh_trials
+    if fresh < 1:
+        raise ValueError(f"fresh_trials must be >= 1, got {fresh}")
     *_, rows = _evaluate_objects(network, params, specs, jax.random.key(seed), num_poses,
-                                 num_trials, backend, progress, "screen")
+                                 num_trials, backend, progress, "screen", fresh_trials=fresh)
     for row in rows:
-        row["hard"] = bool(row["greedy_success"] <= HARD_RULE["max_greedy_success"]
-                           and row["best_success"] >= HARD_RULE["min_best_success"])
+        row["hard"] = is_hard(row)
     return rows
 
 

@@ -226,7 +226,8 @@ def test_screen_rows_follow_the_stated_rule(tiny_theta0):
                            progress=False)
     assert len(rows) == 1
     for r in rows:
-        assert r["hard"] == (r["greedy_success"] <= 0.6 and r["best_success"] >= 0.8)
+        # the best candidate is valued on fresh trials (tests/grasp/test_screen_debiased.py)
+        assert r["hard"] == (r["greedy_success"] <= 0.6 and r["best_success_fresh"] >= 0.8)
         assert 0 <= r["greedy_success"] <= r["best_success"] <= 1
         assert r["mean_success"] <= r["best_success"]
 

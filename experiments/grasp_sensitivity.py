@@ -1,0 +1,288 @@
+"""Sensitivity of the policy comparison to the simulated world, and sim-to-sim transfer.
+
+The shipped θ0 was pretrained in one world A (``scene.SceneConfig()``: 6 N per finger, pad
+friction 0.3; ``sim.TrialConfig()``: object friction ~ U[0.3, 0.8]; no depth noise). Each
+cell of the grid is a world B that differs in
+
+* the finger force: 6 N (A) or 20 N,
+* the object friction range: U[0.3, 0.8] (A) or U[0.2, 0.5] (slipperier objects),
+* the depth sensor: noise-free (A) or RealSense D435-like noise with missing pixels
+  (``depth.CameraConfig(noise_model="realsense")``),
+
+and θ0 learns online there (the paper's protocol: the hard set, SERN / ε-greedy / greedy,
+5 rounds of 20 exploration + 5 evaluation grasps, the low-variance evaluation on fixed poses).
+Cell (6 N, U[0.3, 0.8], clean) is world A itself. Per cell the script saves each seed's
+results (small JSON: the low-variance and 5-grasp evaluations per round, object, policy and
+seed; exploration success), then ``summarise`` computes per cell the paired differences
+SERN − greedy and SERN − ε-greedy of the final round's low-variance success, pooled over the
+objects per seed, with Student-t intervals over seeds and Holm's correction over all the
+cells' comparisons reported together; and, for transfer, per policy how far θ0 falls in B
+against A (round 0) and how much of that online learning recovers by round 1 and round 5.
+
+    python -m experiments.grasp_sensitivity run --seeds 10 --workers 8 \\
+        --out runs/sensitivity                        # the grid, one process per cell
+    python -m experiments.grasp_sensitivity summarise runs/sensitivity
+    python -m figures.make_sensitivity_fig runs/sensitivity
+
+``run`` gives each worker an equal share of the machine's cores (``--workers``), stops
+workers still running at ``--deadline`` seconds (their cells are reported as not run), and
+writes ``<out>/<cell>.json`` per finished cell and ``<out>/summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+FORCES = {"6N": 6.0, "20N": 20.0}
+FRICTIONS = {"mu0.3-0.8": (0.3, 0.8), "mu0.2-0.5": (0.2, 0.5)}
+NOISES = ("clean", "d435")
+CELLS = tuple(f"{f}_{m}_{n}" for f, m, n in itertools.product(FORCES, FRICTIONS, NOISES))
+WORLD_A = CELLS[0]  # 6N_mu0.3-0.8_clean: the world θ0 was pretrained in
+PEERS = ("greedy", "egreedy")
+
+__all__ = ["CELLS", "WORLD_A", "world", "run_cell", "summarise", "main"]
+
+
+def world(cell: str):
+    """(ContextConfig, TrialConfig) of a cell name ``<force>_<friction>_<noise>``."""
+    from sern_jax.grasp import context, depth, scene, sim
+
+    force, friction, noise = cell.split("_")
+    if force not in FORCES or friction not in FRICTIONS or noise not in NOISES:
+        raise ValueError(f"unknown cell {cell!r}; choose from {', '.join(CELLS)}")
+    ctx = context.ContextConfig(
+        scene=scene.SceneConfig(finger_force=FORCES[force]),
+        noise=noise == "d435",
+        camera=depth.CameraConfig(noise_model="realsense" if noise == "d435" else "dexnet"))
+    trial = sim.TrialConfig(friction_range=FRICTIONS[friction])
+    return ctx, trial
+
+
+def _machine() -> dict:
+    import jax
+
+    return {"platform": platform.platform(), "processor": platform.processor(),
+            "cpu_count": os.cpu_count(), "cores_used": len(os.sched_getaffinity(0)),
+            "jax": jax.__version__, "jax_devices": [str(d) for d in jax.devices()],
+            "python": platform.python_version()}
+
+
+def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
+             progress: bool = False) -> dict:
+    """Runs one cell and writes ``out/<cell>.json`` (per-seed results); returns it."""
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, objects, online
+
+    t0 = time.perf_counter()
+    ctx, trial = world(cell)
+    theta0 = artifacts.load_theta0()
+    hard = artifacts.hard_set(theta0, num_objects)
+    specs = [objects.make_object(n) for n in hard["objects"]]
+    config = online.OnlineConfig(num_seeds=seeds, rounds=rounds)
+    res = online.run(config, specs, out / "runs" / cell, theta0=theta0, progress=progress,
+                     log=lambda *_: None, context_config=ctx, trial_config=trial)
+    r = res["results"]
+    rnd = lambda a: np.round(np.asarray(a, np.float64), 5).tolist()  # noqa: E731
+    doc = {
+        "cell": cell,
+        "world": {"finger_force_N": ctx.scene.finger_force,
+                  "friction_range": list(trial.friction_range),
+                  "depth_noise": ctx.camera.noise_model if ctx.noise else "none"},
+        "objects": hard["objects"], "policies": list(config.policies),
+        "seeds": seeds, "rounds": rounds,
+        "axes": "[round 0..R, object, policy, seed]; round 0 = θ0 before learning",
+        "lowvar_eval": rnd(r.lowvar_eval), "paper_eval": rnd(r.paper_eval),
+        "explore_success": rnd(np.nan_to_num(r.explore_success, nan=-1.0)),
+        "config": dataclasses.asdict(config),
+        "trial_counts": res["trial_counts"],
+        "seconds": round(time.perf_counter() - t0, 1),
+        "machine": _machine(),
+    }
+    io.save_json(out / f"{cell}.json", doc)
+    return doc
+
+
+def _final_pooled(doc: dict, policy: str, metric: str = "lowvar_eval",
+                  round_index: int = -1) -> np.ndarray:
+    """[S] per-seed success of ``policy`` at ``round_index``, mean over objects."""
+    a = np.asarray(doc[metric], np.float64)  # [R+1, O, Q, S]
+    return a[round_index, :, doc["policies"].index(policy), :].mean(0)
+
+
+def summarise(out: str | Path, level: float = 0.95) -> dict:
+    """Paired differences per cell (t over seeds, Holm over every cell's comparisons) and
+    the transfer table, from the saved ``<cell>.json`` files; writes ``summary.json``."""
+    from sern_jax import io, stats
+
+    out = Path(out)
+    docs = {c: io.load_json(out / f"{c}.json") for c in CELLS if (out / f"{c}.json").exists()}
+    if not docs:
+        raise ValueError(f"no cell results in {out}")
+    names, diffs = [], []
+    for cell, doc in docs.items():
+        sern = _final_pooled(doc, "sern")
+        for peer in PEERS:
+            names.append(f"{cell}: sern - {peer}")
+            diffs.append(sern - _final_pooled(doc, peer))
+    seeds = {len(d) for d in diffs}
+    if len(seeds) != 1:
+        raise ValueError(f"cells have different seed counts {sorted(seeds)}")
+    rows = stats.paired_differences(np.stack(diffs), names=names, level=level)
+    cells = {}
+    for cell, doc in docs.items():
+        comp = {row.name.split(": ")[1]: {k: (round(v, 6) if isinstance(v, float) else v)
+                                         for k, v in row._asdict().items() if k != "name"}
+                for row in rows if row.name.startswith(cell + ":")}
+        lv = np.asarray(doc["lowvar_eval"], np.float64)  # [R+1, O, Q, S]
+        per_policy = {}
+        for q, pol in enumerate(doc["policies"]):
+            pooled = lv[:, :, q, :].mean(1)  # [R+1, S]
+            per_policy[pol] = {
+                "lowvar_by_round": [round(float(v), 5) for v in pooled.mean(1)],
+                "round5_minus_theta0": t_dict(stats.t_interval(pooled[-1] - pooled[0], level)),
+            }
+        cells[cell] = {"world": doc["world"], "seeds": doc["seeds"], "comparisons": comp,
+                       "policies": per_policy, "seconds": doc["seconds"],
+                       "machine": doc["machine"]}
+    transfer = None
+    if WORLD_A in docs:
+        a0 = _final_pooled(docs[WORLD_A], "greedy", round_index=0)  # θ0 in A, per seed
+        transfer = {}
+        for cell, doc in docs.items():
+            b0 = _final_pooled(doc, "greedy", round_index=0)  # θ0 in B (policy-free)
+            gap = float(a0.mean() - b0.mean())
+            row = {"theta0_A": round(float(a0.mean()), 5), "theta0_B": round(float(b0.mean()), 5),
+                   "gap": round(gap, 5), "policies": {}}
+            for pol in doc["policies"]:
+                rec = {}
+                for r in (1, doc["rounds"]):
+                    gain = float(_final_pooled(doc, pol, round_index=r).mean() - b0.mean())
+                    rec[f"gain_round{r}"] = round(gain, 5)
+                    rec[f"recovered_round{r}"] = (round(gain / gap, 3) if gap > 0.02 else None)
+                row["policies"][pol] = rec
+            transfer[cell] = row
+    signs = {peer: sorted({int(np.sign(round(c["comparisons"][f"sern - {peer}"]["mean"], 9)))
+                           for c in cells.values()}) for peer in PEERS}
+    summary = {
+        "metric": "final-round low-variance greedy success, mean over the objects, per seed",
+        "interval": (f"Student t over seeds (n - 1 dof), {level:.0%} per comparison; Holm "
+                     f"over all {len(rows)} comparisons (pvalue_holm, resolved); half_family "
+                     "= Bonferroni simultaneous half-width"),
+        "cells": cells,
+        "cells_missing": [c for c in CELLS if c not in docs],
+        "sign_of_mean": signs,
+        "resolved": [r.name for r in rows if r.resolved],
+        "transfer": transfer,
+        "transfer_note": ("gap = θ0's pooled low-variance success in world A minus in B "
+                          "(round 0); recovered_roundR = (policy's round-R success in B - "
+                          "θ0's in B) / gap, reported only where the gap exceeds 2 points"),
+    }
+    io.save_json(out / "summary.json", summary)
+    return summary
+
+
+def t_dict(ci) -> dict:
+    return {"mean": round(ci.mean, 6), "half": round(ci.half, 6), "n": ci.n}
+
+
+def _run_grid(args) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cells = args.cells.split(",") if args.cells else list(CELLS)
+    for c in cells:
+        world(c)  # refuses an unknown cell before any work
+    todo = [c for c in cells if not (out / f"{c}.json").exists()]
+    cores = sorted(os.sched_getaffinity(0))
+    workers = max(1, min(args.workers, len(todo) or 1))
+    share = max(1, len(cores) // workers)
+    env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false", PYTHONUNBUFFERED="1")
+    t0 = time.perf_counter()
+    running: dict[str, tuple[subprocess.Popen, object]] = {}
+    slots = list(range(workers))
+    log = open(out / "workers.log", "a")
+    while todo or running:
+        while todo and slots:
+            slot = slots.pop(0)
+            cell = todo.pop(0)
+            mine = cores[slot * share:(slot + 1) * share] or cores
+            cmd = [sys.executable, "-m", "experiments.grasp_sensitivity", "cell", cell,
+                   "--out", str(out), "--seeds", str(args.seeds), "--rounds",
+                   str(args.rounds), "--objects", str(args.objects)]
+            proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                    preexec_fn=lambda m=tuple(mine): os.sched_setaffinity(0, m))
+            running[cell] = (proc, slot)
+            print(f"[{time.perf_counter() - t0:6.0f} s] start {cell} on cores {mine}",
+                  flush=True)
+        time.sleep(2)
+        for cell, (proc, slot) in list(running.items()):
+            if proc.poll() is not None:
+                print(f"[{time.perf_counter() - t0:6.0f} s] done {cell} (exit "
+                      f"{proc.returncode})", flush=True)
+                del running[cell]
+                slots.append(slot)
+        if args.deadline and time.perf_counter() - t0 > args.deadline:
+            for cell, (proc, _) in running.items():
+                proc.kill()
+                print(f"stopped {cell} at the deadline: not run", flush=True)
+            running.clear()
+            todo.clear()
+    log.close()
+    summary = summarise(out)
+    for cell, c in summary["cells"].items():
+        parts = [f"{k} {100 * v['mean']:+.1f} ± {100 * v['half']:.1f}"
+                 f"{' *' if v['resolved'] else ''}" for k, v in c["comparisons"].items()]
+        print(f"{cell:>22s}: " + "; ".join(parts))
+    print("(* = sign resolved after Holm over all comparisons; intervals: 95 % t over "
+          "seeds)")
+    print(f"wrote {out / 'summary.json'} ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    p_run = sub.add_parser("run", help="run the grid's cells in worker processes")
+    p_cell = sub.add_parser("cell", help="run one cell in this process")
+    p_cell.add_argument("cell", choices=CELLS)
+    for p in (p_run, p_cell):
+        p.add_argument("--out", default="runs/sensitivity")
+        p.add_argument("--seeds", type=int, default=10)
+        p.add_argument("--rounds", type=int, default=5)
+        p.add_argument("--objects", type=int, default=6)
+    p_run.add_argument("--cells", default="", help="comma-separated subset (default: all)")
+    p_run.add_argument("--workers", type=int, default=8)
+    p_run.add_argument("--deadline", type=float, default=0.0,
+                       help="seconds after which running cells are stopped (0 = none)")
+    p_sum = sub.add_parser("summarise", help="summary.json from saved cells")
+    p_sum.add_argument("out")
+    args = parser.parse_args(argv)
+    if args.what == "summarise":
+        s = summarise(args.out)
+        print(json.dumps({"resolved": s["resolved"], "sign_of_mean": s["sign_of_mean"],
+                          "cells_missing": s["cells_missing"]}, indent=1))
+        return 0
+    for name in ("seeds", "rounds", "objects"):
+        if getattr(args, name) < (2 if name == "seeds" else 1):
+            parser.error(f"--{name} must be >= {2 if name == 'seeds' else 1}")
+    if args.what == "cell":
+        doc = run_cell(args.cell, Path(args.out), args.seeds, args.rounds, args.objects)
+        print(f"{args.cell}: {doc['seconds']:.0f} s")
+        return 0
+    if args.workers < 1:
+        parser.error("--workers must be >= 1")
+    return _run_grid(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,116 @@
+"""Heat maps of the sensitivity grid, from ``experiments.grasp_sensitivity``'s summary.json.
+
+Panels: SERN − greedy and SERN − ε-greedy (final-round low-variance success, pooled over
+the objects, mean over seeds, percentage points) per cell, each annotated with its 95 %
+Student-t half-width over seeds and a star where the sign is resolved after Holm over all
+the grid's comparisons; a third panel gives θ0's success in each world (round 0) and the
+greedy policy's after the last round (sim-to-sim transfer). Cells not run are grey.
+
+Usage: ``python -m figures.make_sensitivity_fig RUN_DIR [OUT.png]``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["make_figure"]
+
+_FORCES = ("6N", "20N")
+_ROWS = (("mu0.3-0.8", "clean"), ("mu0.3-0.8", "d435"), ("mu0.2-0.5", "clean"),
+         ("mu0.2-0.5", "d435"))
+
+
+def _label(row) -> str:
+    mu, noise = row
+    lo, hi = mu[2:].split("-")
+    return f"μ~U[{lo}, {hi}]\n{'D435 noise' if noise == 'd435' else 'no depth noise'}"
+
+
+def make_figure(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sern_jax import io
+
+    run_dir = Path(run_dir)
+    summary = io.load_json(run_dir / "summary.json")
+    cells = summary["cells"]
+    seeds = sorted({c["seeds"] for c in cells.values()})
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.6))
+    lim = 0.0
+    grids = {}
+    for peer in ("greedy", "egreedy"):
+        m = np.full((len(_ROWS), len(_FORCES)), np.nan)
+        for i, row in enumerate(_ROWS):
+            for j, f in enumerate(_FORCES):
+                c = cells.get(f"{f}_{row[0]}_{row[1]}")
+                if c is not None:
+                    m[i, j] = 100 * c["comparisons"][f"sern - {peer}"]["mean"]
+        grids[peer] = m
+        lim = max(lim, np.nanmax(np.abs(m)) if np.isfinite(m).any() else 1.0)
+    lim = max(lim, 1.0)
+    cmap = matplotlib.colormaps["RdBu"].copy()
+    cmap.set_bad("0.85")
+    for ax, peer, title in ((axes[0], "greedy", "SERN − greedy"),
+                            (axes[1], "egreedy", "SERN − ε-greedy")):
+        im = ax.imshow(np.ma.masked_invalid(grids[peer]), cmap=cmap, vmin=-lim, vmax=lim,
+                       aspect="auto")
+        for i, row in enumerate(_ROWS):
+            for j, f in enumerate(_FORCES):
+                c = cells.get(f"{f}_{row[0]}_{row[1]}")
+                if c is None:
+                    ax.text(j, i, "not run", ha="center", va="center", fontsize=8)
+                    continue
+                comp = c["comparisons"][f"sern - {peer}"]
+                ax.text(j, i, f"{100 * comp['mean']:+.1f}\n± {100 * comp['half']:.1f}"
+                        f"{' *' if comp['resolved'] else ''}", ha="center", va="center",
+                        fontsize=9,
+                        color="w" if abs(100 * comp["mean"]) > 0.6 * lim else "k")
+        ax.set_xticks(range(len(_FORCES)), [f"{f[:-1]} N per finger" for f in _FORCES])
+        ax.set_yticks(range(len(_ROWS)), [_label(r) for r in _ROWS], fontsize=8)
+        ax.set_title(f"{title}, points", fontsize=10)
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
+    ax = axes[2]
+    t = np.full((len(_ROWS), len(_FORCES)), np.nan)
+    for i, row in enumerate(_ROWS):
+        for j, f in enumerate(_FORCES):
+            c = cells.get(f"{f}_{row[0]}_{row[1]}")
+            if c is not None:
+                t[i, j] = 100 * c["policies"]["greedy"]["lowvar_by_round"][0]
+    cmap_t = matplotlib.colormaps["viridis"].copy()
+    cmap_t.set_bad("0.85")
+    im = ax.imshow(np.ma.masked_invalid(t), cmap=cmap_t, vmin=0,
+                   vmax=100, aspect="auto")
+    for i, row in enumerate(_ROWS):
+        for j, f in enumerate(_FORCES):
+            c = cells.get(f"{f}_{row[0]}_{row[1]}")
+            if c is None:
+                ax.text(j, i, "not run", ha="center", va="center", fontsize=8)
+                continue
+            lv = c["policies"]["greedy"]["lowvar_by_round"]
+            ax.text(j, i, f"θ0 {100 * lv[0]:.0f} %\n→ {100 * lv[-1]:.0f} %", ha="center",
+                    va="center", fontsize=9, color="w" if lv[0] < 0.6 else "k")
+    ax.set_xticks(range(len(_FORCES)), [f"{f[:-1]} N per finger" for f in _FORCES])
+    ax.set_yticks(range(len(_ROWS)), [_label(r) for r in _ROWS], fontsize=8)
+    ax.set_title("transfer: θ0 in each world → greedy after\nthe last round (success %)",
+                 fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
+    n = "/".join(str(s) for s in seeds)
+    fig.suptitle(f"Sensitivity of the final-round comparison (low-variance evaluation, pooled "
+                 f"over the hard set; {n} seeds; 95 % t intervals; * = resolved after Holm "
+                 f"over all {2 * len(cells)} comparisons)", fontsize=9)
+    fig.tight_layout()
+    out = Path(out) if out else run_dir / "sensitivity.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return out
+
+
+if __name__ == "__main__":
+    print(make_figure(sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else None))

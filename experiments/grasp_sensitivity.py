@@ -72,7 +72,14 @@ def world(cell: str):
 def _machine() -> dict:
     import jax
 
-    return {"platform": platform.platform(), "processor": platform.processor(),
+    model = ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((ln.split(":", 1)[1].strip() for ln in f
+                          if ln.startswith("model name")), "")
+    except OSError:
+        pass
+    return {"platform": platform.platform(), "processor": model or platform.processor(),
             "cpu_count": os.cpu_count(), "cores_used": len(os.sched_getaffinity(0)),
             "jax": jax.__version__, "jax_devices": [str(d) for d in jax.devices()],
             "python": platform.python_version()}

@@ -96,9 +96,6 @@ def _csv_ints(text: str, name: str) -> list[int]:
 
 def _validate(args) -> None:
     """Every option, before any benchmarking (also those that ``--quick`` replaces)."""
-    import os
-    from pathlib import Path
-
     for flag, text in (("--native-batch", args.native_batch), ("--mjx-batch", args.mjx_batch),
                        ("--context-poses", args.context_poses)):
         _csv_ints(text, flag)
@@ -114,12 +111,9 @@ def _validate(args) -> None:
     if args.threads is not None and not 1 <= args.threads <= 4096:
         raise ValueError(f"--threads must lie in [1, 4096], got {args.threads}")
     if args.out is not None:
-        out = Path(args.out)
-        if out.is_dir():
-            raise ValueError(f"--out {out} is a directory; name a file")
-        parent = out.parent if str(out.parent) else Path(".")
-        if not parent.is_dir() or not os.access(parent, os.W_OK):
-            raise ValueError(f"--out {out}: cannot write in {parent}")
+        from sern_jax.commands import validate
+
+        validate.out_file(args.out, "--out")  # a temporary file is tried where it would go
     if args.agreement:
         from sern_jax.grasp import objects as objects_lib
 

@@ -5,12 +5,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
-import os
 import re
 import time
 from pathlib import Path
 from typing import Callable
+
+from sern_jax.commands import validate
 
 __all__ = [
     "add_dataset_parser",
@@ -35,48 +37,32 @@ def _positive_int(text: str) -> int:
 
 
 def _check_out(path: str | None, what: str = "--out") -> None:
-    """Refuses an output path that cannot become a directory, before any work; leaves
-    nothing behind (a directory made only to test this is removed again)."""
-    if path is None:
-        return
-    p = Path(path)
-    if p.exists():
-        if not p.is_dir():
-            raise ValueError(f"{what} {path} exists and is not a directory")
-        if not os.access(p, os.W_OK):
-            raise ValueError(f"{what} {path} is not writable")
-        return
-    made = []
-    try:
-        for parent in reversed([p, *p.parents]):
-            if not parent.exists():
-                parent.mkdir()
-                made.append(parent)
-    except OSError as exc:
-        raise ValueError(f"{what} {path}: cannot create this directory "
-                         f"({exc.strerror or exc})") from None
-    finally:
-        for d in reversed(made):
-            d.rmdir()
+    """Refuses an output path that cannot become a writable directory, before any work;
+    leaves nothing behind (:func:`validate.out_dir`)."""
+    validate.out_dir(path, what)
 
 
 def _check_file_out(path: str | None, what: str = "--json-out") -> None:
-    """Refuses an output file that could not be written, before any work (writes nothing)."""
-    if not path:
-        return
-    p = Path(path)
-    if p.is_dir():
-        raise ValueError(f"{what} {path} is a directory; name a file")
-    probe = p.parent
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK):
-        raise ValueError(f"{what} {path}: cannot write there")
+    """Refuses an output file that could not be written, before any work
+    (:func:`validate.out_file`: a temporary file is tried where it would go)."""
+    validate.out_file(path, what)
 
 
 def _check_seed(seed: int) -> None:
     if not 0 <= seed < 2**31:
         raise ValueError(f"--seed must be in [0, 2**31), got {seed}")
+
+
+def _check_size(est, out) -> None:
+    """Refuses a run whose estimate (:mod:`sern_jax.grasp.budget`) cannot fit this machine;
+    prints the estimate when the run is long."""
+    from sern_jax.grasp import budget
+
+    budget.check(est, out=out)
+    if est.seconds > 600:
+        print(f"estimated: {est.trials:,} trials, {est.contexts:,} poses, about "
+              f"{budget.fmt_time(est.seconds)} on this machine, "
+              f"{budget.fmt_bytes(est.memory_bytes)} of memory", flush=True)
 
 
 # ----------------------------------------------------------------------------- dataset
@@ -106,16 +92,32 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _run_dataset(args) -> int:
+    _check_seed(args.seed)
     _check_out(args.out)
-    from sern_jax.grasp import dataset
+    from sern_jax.grasp import budget, dataset
 
-    config = dataset.DatasetConfig(seed=args.seed, num_objects=args.objects,
-                                   poses_per_object=args.poses, trials_per_grasp=args.trials,
-                                   backend=args.backend)
+    try:
+        config = dataset.DatasetConfig(seed=args.seed, num_objects=args.objects,
+                                       poses_per_object=args.poses,
+                                       trials_per_grasp=args.trials, backend=args.backend)
+    except ValueError as e:
+        raise ValueError(_dataset_flags(str(e))) from None
+    _check_size(budget.dataset(objects=args.objects, poses=args.poses, trials=args.trials,
+                               objects_per_shard=config.objects_per_shard), args.out)
     summary = dataset.generate(config, args.out, progress=not args.no_progress)
     print(json.dumps(summary, indent=2))
     print(f"dataset directory: {args.out}")
     return 0
+
+
+_DATASET_FLAGS = {"num_objects": "--objects", "poses_per_object": "--poses",
+                  "trials_per_grasp": "--trials", "seed": "--seed", "backend": "--backend"}
+
+
+def _dataset_flags(message: str) -> str:
+    message = re.sub(r"\b(" + "|".join(_DATASET_FLAGS) + r")\b",
+                     lambda m: _DATASET_FLAGS[m.group(1)], message)
+    return re.sub(r"^(\d+) objects x (\d+) poses", r"--objects \1 x --poses \2", message)
 
 
 # ----------------------------------------------------------------------------- pretrain
@@ -156,19 +158,39 @@ def add_pretrain_parser(subparsers) -> argparse.ArgumentParser:
 def _run_pretrain(args) -> int:
     _check_out(args.out)
     _check_seed(args.seed)
-    if not (args.lr > 0):
-        raise ValueError(f"--lr must be > 0, got {args.lr}")
+    validate.finite_float(args.lr, "--lr", low=0, low_open=True, float32_normal=True)
     if not Path(args.data, "config.json").exists():
         raise ValueError(f"--data {args.data} is not a dataset directory; make one with "
                          "`sern grasp dataset --out DIR`")
+    if args.install:
+        _check_out(str(_data_dir()), "--install")
     from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, pretrain
+    from sern_jax.grasp import artifacts, budget, dataset, objects, pretrain
 
-    config = pretrain.PretrainConfig(
-        epochs=args.epochs, batch_size=args.batch_size, learning_rate=args.lr, loss=args.loss,
-        seed=args.seed, heldout_objects=args.heldout_objects,
+    try:
+        config = pretrain.PretrainConfig(
+            epochs=args.epochs, batch_size=args.batch_size, learning_rate=args.lr,
+            loss=args.loss, seed=args.seed, heldout_objects=args.heldout_objects,
+            heldout_poses=args.heldout_poses, heldout_trials=args.heldout_trials,
+            core_k=args.core_k)
+    except ValueError as e:
+        raise ValueError(_pretrain_flags(str(e))) from None
+    # D0's size from its config.json (and summary.json when finished), before loading it
+    try:
+        data_config = dataset.DatasetConfig(**io.load_json(Path(args.data, "config.json"))[
+            "config"])
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        raise ValueError(f"--data {args.data}: config.json is unreadable or not a dataset's "
+                         f"({type(exc).__name__}); rerun `sern grasp dataset`") from None
+    grasps = data_config.max_grasps
+    with contextlib.suppress(OSError, ValueError, TypeError, KeyError):
+        grasps = int(io.load_json(Path(args.data, "summary.json"))["labelled_grasps"])
+    _check_size(budget.pretrain(
+        grasps=grasps, contexts=data_config.num_objects * data_config.poses_per_object,
+        epochs=args.epochs, batch_size=args.batch_size, heldout_objects=args.heldout_objects,
         heldout_poses=args.heldout_poses, heldout_trials=args.heldout_trials,
-        core_k=args.core_k)
+        core_k=args.core_k, screen_objects=len(objects.object_names()),
+        screen_poses=args.screen_poses, screen_trials=args.screen_trials), args.out)
     manifest = pretrain.pretrain(args.data, config, args.out, progress=not args.no_progress)
     theta0 = artifacts.load_theta0(args.out)
     specs = [objects.make_object(n) for n in objects.object_names()]
@@ -181,6 +203,23 @@ def _run_pretrain(args) -> int:
         artifacts.install(args.out)
         print(f"installed into {artifacts.DATA_DIR}")
     return 0
+
+
+_PRETRAIN_FLAGS = {"epochs": "--epochs", "batch_size": "--batch-size",
+                   "learning_rate": "--lr", "heldout_objects": "--heldout-objects",
+                   "heldout_poses": "--heldout-poses", "heldout_trials": "--heldout-trials",
+                   "core_k": "--core-k", "loss": "--loss", "seed": "--seed"}
+
+
+def _pretrain_flags(message: str) -> str:
+    return re.sub(r"\b(" + "|".join(_PRETRAIN_FLAGS) + r")\b",
+                  lambda m: _PRETRAIN_FLAGS[m.group(1)], message)
+
+
+def _data_dir() -> Path:
+    from sern_jax.grasp import artifacts
+
+    return Path(artifacts.DATA_DIR)
 
 
 def _print_screen(rows) -> None:
@@ -238,13 +277,14 @@ def _specs(names, meshes, default_names, units="auto"):
 
 def _run_screen(args) -> int:
     from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, pretrain
+    from sern_jax.grasp import artifacts, budget, objects, pretrain
 
     _check_seed(args.seed)
     _check_file_out(args.json_out)
-    theta0 = artifacts.load_theta0(args.theta0)
     specs = _specs(args.objects, args.mesh, objects.object_names(),
                    getattr(args, "mesh_units", "auto"))
+    _check_size(budget.screen(objects=len(specs), poses=args.poses, trials=args.trials), None)
+    theta0 = artifacts.load_theta0(args.theta0)
     rows = pretrain.screen(theta0.network, theta0.params, specs, args.poses, args.trials,
                            seed=args.seed, progress=not args.no_progress)
     _print_screen(rows)
@@ -367,12 +407,52 @@ def flag_names(message: str) -> str:
     return re.sub(r"^p must", "--p must", message)
 
 
-def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
+def _check_learn_values(args, policies: tuple[str, ...]) -> None:
+    """The float flags of ``sern grasp learn`` as typed (before any float32 cast hides
+    them): finite, in range, and representable as float32 normal numbers (``--alpha
+    1e-300`` became 0 in float32, softmax returned NaN and SERN chose no grasp, exit 0)."""
+    validate.finite_float(args.alpha, "--alpha", low=0, low_open=True, float32_normal=True)
+    validate.finite_float(args.epsilon, "--epsilon", low=0, high=1, float32_normal=True)
+    validate.finite_float(args.alpha0, "--alpha0", low=0, low_open=True, float32_normal=True)
+    validate.finite_float(args.p, "--p", low=0, high=1, low_open=True, high_open=True)
+    if "sern_log" in policies:
+        import math
+
+        horizon = args.rounds * args.explore
+        if horizon < 2:
+            raise ValueError(f"--policies sern_log needs --rounds x --explore >= 2 "
+                             f"(α0/ln(T^p) at T = {horizon} is infinite)")
+        alpha = args.alpha0 / (args.p * math.log(horizon))
+        validate.finite_float(alpha, f"--alpha0 {args.alpha0:g} / ln(T^--p) (sern_log's α)",
+                              low=0, low_open=True, float32_normal=True)
+
+
+def _checkpoint_precheck(out: Path, fingerprint: str) -> None:
+    """A resumed run's checkpoint, verified and matched before anything is written: a
+    damaged file is named in one line, another run's directory is left untouched."""
+    from sern_jax import io
+
+    ckpt = out / "checkpoint.npz"
+    if not ckpt.exists():
+        return
+    saved = io.load_npz(ckpt, advice="delete it to restart the run from round 0 (or "
+                                      "choose another --out)")
+    if str(saved.get("fingerprint")) != fingerprint:
+        raise ValueError(f"{out} holds a different learning run; choose another --out or "
+                         "delete it")
+
+
+def check_learn_args(args, num_objects: int | None = None):
+    """What ``sern grasp learn`` can check before θ0 and the objects are loaded: the output
+    paths, the float flags (:func:`_check_learn_values`), the OnlineConfig and, when the
+    number of objects is known, the run's size (:mod:`sern_jax.grasp.budget`). Returns the
+    OnlineConfig. ``sern reproduce`` calls it before its first part runs."""
     _check_out(args.out)
     _check_file_out(args.json_out)
+    policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
+    _check_learn_values(args, policies)
     from sern_jax.grasp import online
 
-    policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
     try:
         config = online.OnlineConfig(
             policies=policies, num_seeds=args.seeds, rounds=args.rounds,
@@ -383,33 +463,57 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
             backend=getattr(args, "backend", "native"))
     except ValueError as e:
         raise ValueError(flag_names(str(e))) from None
+    if num_objects is not None:
+        _check_learn_size(config, num_objects, args.out)
+    return config
+
+
+def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
+    config = check_learn_args(args)
     from sern_jax import io
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp import artifacts, online
 
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
     # such even where θ0 is missing); the default objects come from θ0's screen
     explicit = bool(args.objects) or bool(args.mesh)
     units = getattr(args, "mesh_units", "auto")
     specs = _specs(args.objects, args.mesh, (), units) if explicit else None
+    if specs is not None:  # sizes before θ0 is even loaded
+        _check_learn_size(config, len(specs), args.out)
     theta0 = artifacts.load_theta0(args.theta0)
     if specs is None:
         specs = _specs((), (), artifacts.hard_set(theta0)["objects"])
+        _check_learn_size(config, len(specs), args.out)
     t0 = time.perf_counter()
-    out = Path(args.out) if args.out else Path("runs") / (
-        "learn-" + online.run_fingerprint(config, specs, theta0))
-    res = online.run(config, specs, out, theta0=theta0, progress=not args.no_progress, log=log)
-    seconds = time.perf_counter() - t0
-    write_learn_outputs(out, res, seconds, theta0)
-    table = format_table(res["table"])
-    print(table)
-    if not args.no_figures and make_figures is not None:
-        for path in make_figures(out):
-            print(f"wrote {path}")
+    fingerprint = online.run_fingerprint(config, specs, theta0)
+    out = Path(args.out) if args.out else Path("runs") / ("learn-" + fingerprint)
+    _checkpoint_precheck(out, fingerprint)
+    with validate.locked_run_dir(out):
+        res = online.run(config, specs, out, theta0=theta0, progress=not args.no_progress,
+                         log=log)
+        seconds = time.perf_counter() - t0
+        write_learn_outputs(out, res, seconds, theta0)
+        table = format_table(res["table"])
+        print(table)
+        if not args.no_figures and make_figures is not None:
+            for path in make_figures(out):
+                print(f"wrote {path}")
     if args.json_out:
         io.save_json(args.json_out, {"table": res["table"], "seconds": seconds,
                                      "machine": io.run_metadata()["host"]})
     print(f"run directory: {out}  ({seconds:.0f} s)")
     return 0
+
+
+def _check_learn_size(config, num_objects: int, out) -> None:
+    from sern_jax.grasp import budget
+
+    _check_size(budget.learn(
+        objects=num_objects, policies=len(config.policies), seeds=config.num_seeds,
+        rounds=config.rounds, explore=config.explore, evaluate=config.evaluate,
+        eval_poses=config.eval_poses, eval_trials=config.eval_trials,
+        regret_trials=config.regret_trials, fit_steps=config.fit_steps,
+        batch_size=config.batch_size), out)
 
 
 def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:

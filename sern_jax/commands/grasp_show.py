@@ -263,8 +263,9 @@ def run(args) -> int:
             f"would be {64 * args.trials:,} simulated grasps), got {args.trials}")
     if not 0 <= args.seed <= 2**32 - 1:
         raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
-    if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise ValueError(f"--out {args.out} exists and is not a directory")
+    from sern_jax.commands import validate
+
+    validate.out_dir(args.out)  # tried for real (made and removed), before any work
     if (args.object is None) == (args.mesh is None):
         raise ValueError(
             "give exactly one of OBJECT or --mesh PATH (see --help, --list)"

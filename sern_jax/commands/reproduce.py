@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from sern_jax.commands import validate
+
 __all__ = ["add_parser", "run", "LEARN_FULL", "LEARN_QUICK"]
 
 LEARN_FULL = {"objects": 6, "seeds": 5, "rounds": 5}
@@ -55,7 +57,6 @@ def add_parser(subparsers, *, check_run: Callable, regret_defaults, run_regret: 
 
 
 def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_figures) -> int:
-    from sern_jax import io
     from sern_jax.commands import grasp_learn as learn_cli
 
     name = "reproduce-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S") + (
@@ -67,6 +68,26 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
     theta0 = artifacts.load_theta0()  # fails early, with a message, if θ0 is missing
     size = LEARN_QUICK if args.quick else LEARN_FULL
     hard = artifacts.hard_set(theta0, size["objects"])
+    # `sern grasp learn`'s own parser, so every other flag keeps its documented default;
+    # its values and sizes are checked now, before the checks and regret parts run
+    learn_parser = argparse.ArgumentParser(add_help=False)
+    learn_cli.add_learn_parser(learn_parser.add_subparsers())
+    learn_args = learn_parser.parse_args(
+        ["learn", *hard["objects"], "--seeds", str(size["seeds"]), "--rounds",
+         str(size["rounds"]), "--out", str(out / "learn")]
+        + (["--no-progress"] if args.no_progress else []))
+    learn_cli.check_learn_args(learn_args, len(hard["objects"]))
+    with validate.locked_run_dir(out):
+        return _run_locked(args, out, theta0, size, hard, learn_args, check_run=check_run,
+                           regret_defaults=regret_defaults, run_regret=run_regret,
+                           regret_figures=regret_figures, learn_figures=learn_figures)
+
+
+def _run_locked(args, out, theta0, size, hard, learn_args, *, check_run, regret_defaults,
+                run_regret, regret_figures, learn_figures) -> int:
+    from sern_jax import io
+    from sern_jax.commands import grasp_learn as learn_cli
+
     expected = EXPECTED_S["check"] + EXPECTED_S["regret"] + EXPECTED_S[
         "learn_quick" if args.quick else "learn_full"]
     print(f"sern reproduce{' --quick' if args.quick else ''}: theory checks, regret curves, "
@@ -93,13 +114,6 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
 
     # 3. grasp learning (Table I)
     t = time.perf_counter()
-    # `sern grasp learn`'s own parser, so every other flag keeps its documented default
-    learn_parser = argparse.ArgumentParser(add_help=False)
-    learn_cli.add_learn_parser(learn_parser.add_subparsers())
-    learn_args = learn_parser.parse_args(
-        ["learn", *hard["objects"], "--seeds", str(size["seeds"]), "--rounds",
-         str(size["rounds"]), "--out", str(out / "learn")]
-        + (["--no-progress"] if args.no_progress else []))
     learn_cli.run_learn(learn_args, make_figures=learn_figures, log=lambda *_: None)
     timings["learn_s"] = time.perf_counter() - t
     table = json.loads((out / "learn" / "table.json").read_text())["table"]

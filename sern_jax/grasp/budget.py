@@ -75,6 +75,11 @@ class Estimate:
     disk_flags: str = ""
 
 
+def _largest(parts: dict[str, float]) -> str:
+    """The flags of the largest part (what a refusal names)."""
+    return max(parts.items(), key=lambda kv: kv[1])[0]
+
+
 def _cores() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -115,7 +120,8 @@ def dataset(*, objects: int, poses: int, trials: int, objects_per_shard: int = 1
         memory_bytes=int(2 * shard + per_object), disk_bytes=int(contexts * CONTEXT_BYTES),
         trials=int(num_trials), contexts=int(contexts),
         seconds=_seconds(num_trials, contexts),
-        memory_flags="--poses x --trials", work_flags="--objects x --poses x --trials",
+        memory_flags="--poses x --trials" if trials > 1 else "--poses",
+        work_flags="--objects x --poses x --trials" if trials > 1 else "--objects x --poses",
         disk_flags="--objects x --poses")
 
 
@@ -139,14 +145,19 @@ def pretrain(*, grasps: int, epochs: int, batch_size: int, heldout_objects: int,
     ctx = heldout_objects * heldout_poses + screen_objects * screen_poses
     # training: ~1 s per epoch on 18k grasps on the 2-core machine (README)
     train_s = epochs * grasps / 18_000.0 * 2 / _cores()
+    memory_parts = {"--data (D0's grasps)": data + dpp, "--batch-size": batch,
+                    "--heldout-poses x --heldout-trials": heldout,
+                    "--screen-poses x --screen-trials": screen_mem}
+    work_parts = {"--epochs": train_s * TRIALS_PER_CORE_S * _cores(),
+                  "--heldout-objects x --heldout-poses x --heldout-trials":
+                      heldout_objects * heldout_poses * K * heldout_trials,
+                  "--screen-poses x --screen-trials": screen_objects * screen_poses * K
+                      * screen_trials}
     return Estimate(
         memory_bytes=int(data + dpp + max(heldout, screen_mem) + batch),
         disk_bytes=int(core_k * 2 * CROP_BYTES + 4 * PARAM_COPY_BYTES + 1e6),
         trials=int(trials), contexts=int(ctx), seconds=_seconds(trials, ctx, train_s),
-        memory_flags="--data's grasps, --batch-size, --heldout-poses x --heldout-trials, "
-                     "--screen-poses x --screen-trials",
-        work_flags="--epochs, --heldout-objects x --heldout-poses x --heldout-trials, "
-                   "--screen-poses x --screen-trials",
+        memory_flags=_largest(memory_parts), work_flags=_largest(work_parts),
         disk_flags="--core-k")
 
 
@@ -181,22 +192,32 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     lowvar_trials = o * s * q * eval_poses * eval_trials * TRIAL_ROW_BYTES
     oracle = s * e * K * regret_trials * TRIAL_ROW_BYTES
     fit = o * s * q * batch_size * CROP_BYTES * 4
-    memory = (3 * buffer + 3 * copies + round_ctx + eval_ctx + lowvar + lowvar_trials
-              + oracle + fit)
-    trials = ((r * e + (r + 1) * evaluate) * o * s * q
-              + (r + 1) * o * s * q * eval_poses * eval_trials
-              + r * o * s * e * K * regret_trials)
+    memory_parts = {
+        "objects x --seeds x policies x --rounds x --explore": 3 * buffer + 3 * copies
+        + round_ctx + fit,
+        "objects x --seeds x --evaluate": eval_ctx,
+        "objects x --seeds x --eval-poses": lowvar,
+        "--eval-poses x --eval-trials": lowvar_trials,
+        "--regret-trials": oracle,
+    }
+    memory = sum(memory_parts.values())
+    trial_parts = {
+        "objects x --seeds x --rounds x --explore": r * e * o * s * q,
+        "--evaluate": (r + 1) * evaluate * o * s * q,
+        "--eval-poses x --eval-trials": (r + 1) * o * s * q * eval_poses * eval_trials,
+        "--regret-trials": r * o * s * e * K * regret_trials,
+    }
+    trials = sum(trial_parts.values())
     contexts = o * s * (r * e + (r + 1) * evaluate + eval_poses)
+    trial_parts["objects x --seeds x --eval-poses"] = o * s * eval_poses * (
+        CONTEXT_CORE_S * TRIALS_PER_CORE_S)
     # updates: ~31 s for the paper's 6 x 3 x 5 copies x 5 rounds x 40 steps (README)
     update_s = r * o * s * q * fit_steps * batch_size * 31.0 / (6 * 3 * 5 * 5 * 40 * 32)
     return Estimate(
         memory_bytes=int(memory), disk_bytes=int(2 * buffer + 2 * copies + 1e6),
         trials=int(trials), contexts=int(contexts),
         seconds=_seconds(trials, contexts, update_s * 2 / _cores()),
-        memory_flags=("objects x --seeds x policies x --rounds x --explore, "
-                      "--eval-poses x --eval-trials, --regret-trials"),
-        work_flags=("objects x --seeds x --rounds x --explore x --regret-trials, "
-                    "--eval-poses x --eval-trials, --evaluate"),
+        memory_flags=_largest(memory_parts), work_flags=_largest(trial_parts),
         disk_flags="objects x --seeds x policies x --rounds x --explore")
 
 

@@ -28,6 +28,7 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
       make_figures: ``make_figures(run_dir) -> [paths]``, or None (no figures).
     """
     d = defaults
+    _NEURAL = _neural().NeuralRegretExperiment()
     p = subparsers.add_parser(
         "regret",
         help="regret curves of SERN and peers over many seeds (saves a run directory + figures)",
@@ -41,21 +42,51 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
             "saved as they complete: rerunning the same command resumes an interrupted run."
         ),
     )
-    p.add_argument("--policies", default=",".join(d.policies),
-                   help="comma list from: softmax, greedy, epsilon_greedy, ucb1, thompson, "
-                        "boltzmann_gumbel, exp3")
+    p.add_argument("--policies", default=None,
+                   help=f"comma list from: softmax, greedy, epsilon_greedy, ucb1, thompson, "
+                        f"boltzmann_gumbel, exp3 (default {','.join(d.policies)}); with "
+                        f"--estimator neural the learner registry's names (sern, sern_log, "
+                        f"egreedy, greedy, normalized, neural_linucb, neural_lints, "
+                        f"ensemble_ts, neural_ucb, uniform; softmax and epsilon_greedy are "
+                        f"aliases of sern and egreedy; default {','.join(_NEURAL.policies)})")
     p.add_argument("--estimator", default=d.estimator,
                    help="exact, addhalf, mean, adv, adv_low, rademacher, gauss, flip, pinned, "
-                        "l1median, l1argmax")
-    p.add_argument("--arms", type=int, default=d.num_arms, help="number of arms K")
+                        "l1median, l1argmax; or neural (an MLP fine-tuned by each learner, on "
+                        "--problem wheel|finite|linear)")
+    p.add_argument("--problem", default="bernoulli",
+                   help="bernoulli (the tabular engine's K-armed / finite-context problem); "
+                        "with --estimator neural: wheel (Riquelme et al. 2018, --delta), "
+                        "finite (--contexts feature vectors, gap --gap), linear")
+    p.add_argument("--delta", type=float, default=_NEURAL.delta,
+                   help="the wheel bandit's δ in (0, 1) (Riquelme et al.: 0.5, 0.7, 0.9, "
+                        "0.95, 0.99)")
+    p.add_argument("--update-every", type=int, default=_NEURAL.update_every,
+                   help="neural: decisions between network updates (divides --horizon)")
+    p.add_argument("--hidden", default=",".join(map(str, _NEURAL.hidden)),
+                   help="neural: the MLP's hidden widths, comma list")
+    p.add_argument("--fit-steps", type=int, default=_NEURAL.fit_steps,
+                   help="neural: Adam minibatch steps per update")
+    p.add_argument("--batch-size", type=int, default=_NEURAL.batch_size,
+                   help="neural: rows per minibatch step")
+    p.add_argument("--learning-rate", type=float, default=_NEURAL.learning_rate,
+                   help="neural: Adam step size")
+    p.add_argument("--context-dim", type=int, default=_NEURAL.context_dim,
+                   help="neural finite/linear problems: context feature dimension d")
+    p.add_argument("--arms", type=int, default=None,
+                   help=f"number of arms K (default {d.num_arms}; neural: {_NEURAL.num_arms}, "
+                        f"the wheel has 5)")
     p.add_argument("--means", default=d.means,
                    help="'linspace' (0.9 down to 0.1), 'random' (U[0,1] per seed) or a comma "
                         "list of K success probabilities")
-    p.add_argument("--contexts", type=int, default=d.num_contexts,
-                   help="number of i.i.d. contexts M (M > 1: random problem with gap --gap)")
+    p.add_argument("--contexts", type=int, default=None,
+                   help=f"number of i.i.d. contexts M (M > 1: random problem with gap --gap; "
+                        f"default {d.num_contexts}; neural finite: {_NEURAL.num_contexts})")
     p.add_argument("--gap", type=float, default=d.gap, help="Assumption-1 gap Δ2 when M > 1")
-    p.add_argument("--horizon", "-T", type=int, default=d.horizon, help="rounds T")
-    p.add_argument("--seeds", "-S", type=int, default=d.num_seeds, help="number of seeds S")
+    p.add_argument("--horizon", "-T", type=int, default=None,
+                   help=f"rounds T (default {d.horizon}; neural: {_NEURAL.horizon})")
+    p.add_argument("--seeds", "-S", type=int, default=None,
+                   help=f"number of seeds S (default {d.num_seeds}; neural: "
+                        f"{_NEURAL.num_seeds})")
     p.add_argument("--schedule", default=d.schedule,
                    help="constant (α = α0), log (α0/ln(T^p), Algorithm 1), theorem4")
     p.add_argument("--alpha", type=float, default=d.alpha0, help="SERN temperature α0 > 0")
@@ -64,8 +95,9 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
     p.add_argument("--seed", type=int, default=d.seed, help="root seed")
     p.add_argument("--checkpoints", type=int, default=d.num_checkpoints,
                    help="log-spaced checkpoints of t")
-    p.add_argument("--chunk-size", type=int, default=d.chunk_size,
-                   help="seeds per compiled call (memory bound; resume granularity)")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help=f"seeds per compiled call (memory bound; resume granularity; "
+                        f"default {d.chunk_size}; neural: {_NEURAL.chunk_size})")
     p.add_argument("--float64", action="store_true", help="run in float64")
     p.add_argument("--devices", type=int, default=d.devices,
                    help="shard seeds over this many devices")
@@ -82,15 +114,77 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
     return p
 
 
+def _neural():
+    """experiments/neural_regret.py (``--estimator neural``), from the script folder."""
+    from sern_jax.commands._scripts import script_module
+
+    return script_module("experiments", "neural_regret")
+
+
+def _or(value, default):
+    return default if value is None else value
+
+
+def _run_neural(args, make_figures: Callable | None) -> int:
+    """``--estimator neural``: learners of the registry with an MLP on an exact-reward
+    problem (experiments/neural_regret.py); the same run-directory layout."""
+    mod = _neural()
+    nd = mod.NeuralRegretExperiment()
+    if args.problem == "bernoulli":
+        raise ValueError("--estimator neural needs --problem wheel, finite or linear")
+    if args.float64:
+        raise ValueError("--float64 applies to the tabular estimators, not --estimator neural")
+    if args.devices != 1:
+        raise ValueError("--devices applies to the tabular estimators, not --estimator neural")
+    if not args.per_seed:
+        raise ValueError("--no-per-seed applies to the tabular estimators, not --estimator "
+                         "neural")
+    if args.means != "linspace":
+        raise ValueError("--means applies to --problem bernoulli, not --estimator neural")
+    try:
+        hidden = tuple(int(w) for w in args.hidden.split(",") if w.strip())
+    except ValueError:
+        raise ValueError(f"--hidden must be a comma list of integers, got {args.hidden!r}") \
+            from None
+    policies = (nd.policies if args.policies is None
+                else tuple(s.strip() for s in args.policies.split(",") if s.strip()))
+    exp = mod.NeuralRegretExperiment(
+        policies=policies, problem=args.problem, delta=args.delta,
+        num_arms=_or(args.arms, nd.num_arms), num_contexts=_or(args.contexts, nd.num_contexts),
+        gap=args.gap, context_dim=args.context_dim, horizon=_or(args.horizon, nd.horizon),
+        num_seeds=_or(args.seeds, nd.num_seeds), update_every=args.update_every,
+        hidden=hidden, fit_steps=args.fit_steps, batch_size=args.batch_size,
+        learning_rate=args.learning_rate, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
+        schedule=args.schedule, seed=args.seed, num_checkpoints=args.checkpoints,
+        chunk_size=_or(args.chunk_size, nd.chunk_size))
+    out = Path(args.out) if args.out else Path("runs") / f"regret-neural-{exp.fingerprint()}"
+    run_dir = mod.run_experiment(exp, out, progress=not args.no_progress)
+    print((run_dir / "report.md").read_text())
+    if not args.no_figures and make_figures is not None:
+        for path in make_figures(run_dir):
+            print(f"wrote {path}")
+    print(f"run directory: {run_dir}")
+    return 0
+
+
 def run(args, *, defaults: Any, run_experiment: Callable,
         make_figures: Callable | None = None) -> int:
     """Runs the experiment described by ``args`` (see :func:`add_parser` for the rest)."""
+    if args.estimator == "neural":
+        return _run_neural(args, make_figures)
+    if args.problem != "bernoulli":
+        raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
+                         f"estimators run --problem bernoulli)")
+    d = defaults
     exp = dataclasses.replace(
-        defaults, policies=tuple(s.strip() for s in args.policies.split(",") if s.strip()),
-        estimator=args.estimator, num_arms=args.arms, means=args.means,
-        num_contexts=args.contexts, gap=args.gap, horizon=args.horizon, num_seeds=args.seeds,
+        defaults, policies=(d.policies if args.policies is None else
+                            tuple(s.strip() for s in args.policies.split(",") if s.strip())),
+        estimator=args.estimator, num_arms=_or(args.arms, d.num_arms), means=args.means,
+        num_contexts=_or(args.contexts, d.num_contexts), gap=args.gap,
+        horizon=_or(args.horizon, d.horizon), num_seeds=_or(args.seeds, d.num_seeds),
         schedule=args.schedule, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
-        seed=args.seed, num_checkpoints=args.checkpoints, chunk_size=args.chunk_size,
+        seed=args.seed, num_checkpoints=args.checkpoints,
+        chunk_size=_or(args.chunk_size, d.chunk_size),
         float64=args.float64, devices=args.devices,
         **({"per_seed": False} if not args.per_seed else {}))
     out = Path(args.out) if args.out else Path("runs") / f"regret-{exp.fingerprint()}"

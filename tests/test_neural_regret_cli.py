@@ -1,0 +1,86 @@
+"""`sern regret --estimator neural`: run directory, resume, aliases, bad input (one line
+naming the flag, exit 2, nothing written). Tiny networks and horizons."""
+
+import json
+
+import numpy as np
+import pytest
+
+from sern_jax import io
+from sern_jax.commands import main as cli
+
+ARGS = ["regret", "--estimator", "neural", "--problem", "wheel", "--delta", "0.5",
+        "--policies", "sern,uniform", "-T", "40", "--update-every", "20", "-S", "4",
+        "--chunk-size", "2", "--hidden", "4", "--fit-steps", "2", "--batch-size", "8",
+        "--checkpoints", "4", "--no-progress", "--no-figures"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("neural") / "run"
+    assert cli.main(ARGS + ["--out", str(out)]) == 0
+    return out
+
+
+def test_run_directory_and_summary(run_dir):
+    for name in ("config.json", "metadata.json", "results.npz", "summary.json", "report.md"):
+        assert (run_dir / name).exists(), name
+    res = io.load_npz(run_dir / "results.npz")
+    assert res["sern__counts"].shape == (4, res["t"].size, 5)
+    assert res["t"][-1] == 40
+    np.testing.assert_array_equal(res["sern__counts"][:, -1].sum(-1), 40)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    for policy in ("sern", "uniform"):
+        assert summary["policies"][policy]["regret_T_mean"] > 0
+    assert summary["normalised_by_uniform"]["uniform"]["ratio"] == pytest.approx(1.0)
+
+
+def test_resume_equals_uninterrupted_and_aliases(run_dir, tmp_path):
+    out = tmp_path / "resumed"
+    (out / "chunks").mkdir(parents=True)
+    first = sorted((run_dir / "chunks").glob("sern__*.npz"))[0]  # seeds 0-1 of sern only
+    (out / "chunks" / first.name).write_bytes(first.read_bytes())
+    assert cli.main(ARGS + ["--out", str(out)]) == 0
+    a, b = io.load_npz(run_dir / "results.npz"), io.load_npz(out / "results.npz")
+    assert set(a) == set(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    # the tabular name is an alias of the registry's: softmax runs sern (same numbers)
+    alias = tmp_path / "alias"
+    args = [x if x != "sern,uniform" else "softmax" for x in ARGS]
+    args[args.index("-S") + 1] = "2"
+    assert cli.main(args + ["--out", str(alias)]) == 0
+    c = io.load_npz(alias / "results.npz")
+    np.testing.assert_array_equal(c["softmax__counts"], a["sern__counts"][:2])
+    np.testing.assert_allclose(c["softmax__regret_rb"], a["sern__regret_rb"][:2], rtol=1e-6)
+
+
+@pytest.mark.parametrize("extra, flag", [
+    (["--delta", "1.5"], "--delta"),
+    (["--delta", "0"], "--delta"),
+    (["--policies", "ucb1"], "--policies"),
+    (["--policies", "sern,softmax"], "--policies"),
+    (["--update-every", "30"], "--update-every"),
+    (["--hidden", "0"], "--hidden"),
+    (["--hidden", "a"], "--hidden"),
+    (["--problem", "finite", "--arms", "1"], "--arms"),
+    (["--problem", "finite", "--gap", "1.2"], "--gap"),
+    (["--problem", "wheel", "--arms", "3"], "--arms"),
+    (["--problem", "bernoulli"], "--problem"),
+    (["--fit-steps", "0"], "--fit-steps"),
+    (["--learning-rate", "-1"], "--learning-rate"),
+    (["--float64"], "--float64"),
+])
+def test_bad_input_is_one_line_naming_the_flag(extra, flag, tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert cli.main(ARGS + extra + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert flag in err and "\n" not in err, err
+    assert not out.exists()
+
+
+def test_problem_without_neural_estimator_is_refused(tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert cli.main(["regret", "--problem", "wheel", "--out", str(out)]) == 2
+    assert "--problem" in capsys.readouterr().err
+    assert not out.exists()

@@ -23,6 +23,7 @@ _TOP_LEVEL = (
 _BENCH = (
     ("sern_jax.commands.bench_bandit", "add_parser"),  # sern bench bandit
     ("sern_jax.commands.bench_grasp", "add_parser"),  # sern bench grasp
+    ("sern_jax.commands.bench_neural", "add_parser"),  # sern bench neural
 )
 # Commands under `sern grasp ...`.
 _GRASP = (

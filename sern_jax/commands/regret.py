@@ -116,8 +116,12 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
 
 def _neural():
     """experiments/neural_regret.py (``--estimator neural``), from the script folder."""
-    from sern_jax.commands._scripts import script_module
+    try:
+        from sern_jax.commands._scripts import script_module
+    except ImportError:  # a tree without the script-folder helper: the clone's folder
+        import importlib
 
+        return importlib.import_module("experiments.neural_regret")
     return script_module("experiments", "neural_regret")
 
 

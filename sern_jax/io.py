@@ -301,6 +301,7 @@ def npz_unit_done(path: str | os.PathLike, log: Callable[[str], None] | None = p
 # ----------------------------------------------------------------------------- run locks
 
 LOCK_FILE = ".sern.lock"
+_HELD: dict[str, int] = {}  # run directories this process holds -> nesting depth
 
 
 class RunLockedError(ValueError):
@@ -331,6 +332,8 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
 
     Call it after validating the inputs (it creates the directory); re-read anything another
     process could have written (config.json, checkpoints) after entering, under the lock.
+    Re-entrant within a process: a command that holds the lock may call a library function
+    that takes it again (the inner call passes through).
 
     Args:
       run_dir: the run directory.
@@ -346,6 +349,14 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    key = os.path.realpath(run_dir)
+    if _HELD.get(key):
+        _HELD[key] += 1
+        try:
+            yield run_dir
+        finally:
+            _HELD[key] -= 1
+        return
     lock_path = run_dir / LOCK_FILE
     fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
     try:
@@ -366,9 +377,11 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
                     [Path(sys.argv[0]).name, *sys.argv[1:]])}
         os.ftruncate(fd, 0)
         os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        _HELD[key] = 1
         try:
             yield run_dir
         finally:
+            _HELD.pop(key, None)
             # the file stays (unlinking it would let two processes lock two inodes); emptied
             # so that it names no holder while unlocked
             with contextlib.suppress(OSError):

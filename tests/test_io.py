@@ -170,3 +170,16 @@ def test_run_lock_is_released_on_error_and_reentrant_across_runs(tmp_path):
     with io.run_lock(tmp_path / "r"):
         pass
     assert time.perf_counter() - start < 1.0
+
+
+def test_run_lock_is_reentrant_within_a_process(tmp_path):
+    """A command holding the lock may call a library function that takes it again."""
+    with io.run_lock(tmp_path / "r", command="outer"):
+        with io.run_lock(tmp_path / "r", command="inner"):
+            pass
+        # still held by the outer block: another process is refused
+        out = subprocess.run([sys.executable, "-c", _SECOND, str(tmp_path / "r")],
+                             capture_output=True, text=True, timeout=60, check=False)
+        assert out.returncode == 3 and "outer" in out.stdout
+    with io.run_lock(tmp_path / "r"):  # released after the outer block
+        pass

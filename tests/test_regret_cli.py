@@ -193,7 +193,19 @@ def test_damaged_seed_chunk_is_recomputed(run_dir, tmp_path, how, capsys):
 
 
 def test_regret_run_directory_is_locked(run_dir, capsys):
-    with io.run_lock(run_dir, command="sern regret (another)"):
+    import subprocess
+    import sys
+
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom sern_jax import io\n"
+         "with io.run_lock(sys.argv[1], command='sern regret (another)'):\n"
+         "    print('locked', flush=True)\n    time.sleep(120)\n", str(run_dir)],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
         assert cli.main(ARGS + ["--out", str(run_dir), "--no-figures"]) == 2
+    finally:
+        holder.kill()
+        holder.wait()
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "in use by" in err[0] and "sern regret (another)" in err[0]

@@ -171,6 +171,25 @@ def test_dataset_run_directory_is_locked(tiny_dataset, tmp_path):
     config, first = tiny_dataset
     d0 = tmp_path / "d0"
     shutil.copytree(first, d0)
-    with io.run_lock(d0, command="another dataset run"), \
-            pytest.raises(io.RunLockedError, match="another dataset run"):
-        dataset.generate(config, d0, progress=False, log=lambda *_: None)
+    holder = hold_lock_in_another_process(d0, "another dataset run")
+    try:
+        with pytest.raises(io.RunLockedError, match="another dataset run"):
+            dataset.generate(config, d0, progress=False, log=lambda *_: None)
+    finally:
+        holder.kill()
+        holder.wait()
+    dataset.generate(config, d0, progress=False, log=lambda *_: None)  # killed: free again
+
+
+def hold_lock_in_another_process(run_dir, command):
+    """A real second process holding ``io.run_lock(run_dir)``; kill it with SIGKILL."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom sern_jax import io\n"
+         "with io.run_lock(sys.argv[1], command=sys.argv[2]):\n"
+         "    print('locked', flush=True)\n    time.sleep(120)\n", str(run_dir), command],
+        stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "locked"
+    return proc

@@ -10,6 +10,8 @@ import argparse
 import importlib
 import sys
 
+from sern_jax.commands.validate import OneLineParser
+
 __all__ = ["main", "build_parser", "add_regret_parser", "add_reproduce_parser",
            "add_learn_parser"]
 
@@ -18,6 +20,7 @@ _TOP_LEVEL = (
     ("sern_jax.commands.main", "add_reproduce_parser"),  # sern reproduce (the main job)
     ("sern_jax.commands.main", "add_regret_parser"),  # sern regret (wires experiments/ and figures/)
     ("sern_jax.commands.check", "add_parser"),  # sern check
+    ("sern_jax.commands.experiment", "add_parser"),  # sern experiment NAME (experiments/)
 )
 # Commands under `sern bench ...`.
 _BENCH = (
@@ -39,9 +42,11 @@ def add_regret_parser(subparsers) -> None:
     """``sern regret``: the command modules are the only modules that import the script folders
     (``experiments/``, ``figures/``); this hands their functions to
     :mod:`sern_jax.commands.regret`."""
-    from experiments import regret
-    from figures import make_regret_figs
     from sern_jax.commands import regret as regret_cmd
+    from sern_jax.commands._scripts import script_module
+
+    regret = script_module("experiments", "regret")
+    make_regret_figs = script_module("figures", "make_regret_figs")
 
     regret_cmd.add_parser(subparsers, defaults=regret.RegretExperiment(),
                           run_experiment=regret.run_experiment,
@@ -50,8 +55,10 @@ def add_regret_parser(subparsers) -> None:
 
 def add_learn_parser(subparsers) -> None:
     """``sern grasp learn``, with its figure maker from ``figures/``."""
-    from figures import make_learn_figs
     from sern_jax.commands import grasp_learn
+    from sern_jax.commands._scripts import script_module
+
+    make_learn_figs = script_module("figures", "make_learn_figs")
 
     grasp_learn.add_learn_parser(subparsers, make_figures=make_learn_figs.make_figures)
 
@@ -59,10 +66,13 @@ def add_learn_parser(subparsers) -> None:
 def add_reproduce_parser(subparsers) -> None:
     """``sern reproduce``: the check runner, the regret experiment and the figure makers are
     handed to :mod:`sern_jax.commands.reproduce` from the script folders here."""
-    from experiments import regret
-    from figures import make_learn_figs, make_regret_figs
     from sern_jax.commands import check as check_cli
     from sern_jax.commands import reproduce
+    from sern_jax.commands._scripts import script_module
+
+    regret = script_module("experiments", "regret")
+    make_learn_figs = script_module("figures", "make_learn_figs")
+    make_regret_figs = script_module("figures", "make_regret_figs")
 
     reproduce.add_parser(subparsers, check_run=check_cli.run,
                          regret_defaults=regret.RegretExperiment(),
@@ -83,7 +93,8 @@ def _register(subparsers, entries) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    # OneLineParser: usage errors are one line (subparsers inherit the class); --help unchanged
+    parser = OneLineParser(
         prog="sern",
         description=(
             "sern_jax: SERN (Shannon-entropy-regularised neural contextual bandits) in JAX. "
@@ -115,7 +126,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _missing(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
+    """No subcommand given: one line naming the choices (the bad-input promise)."""
+    choices = [name for action in parser._actions
+               if isinstance(action, argparse._SubParsersAction) for name in action.choices]
+    print(f"{parser.prog}: error: choose a command: {', '.join(choices)} "
+          f"(see {parser.prog} --help)", file=sys.stderr)
     return 2
 
 
@@ -123,8 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):
-        parser.print_help(sys.stderr)
-        return 2
+        return _missing(parser)
     try:
         return int(args.func(args) or 0)
     except (ValueError, OverflowError) as exc:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from proofs_check import framework as fw
+from . import framework as fw
 
 BETA = 0.5 + 1e-3
 INSTANCES = ((0.9, 0.5), (0.6, 0.4))

@@ -7,8 +7,8 @@ On 0/1 rewards Σ|R_i − x| = n₁ + (n₀ − n₁)x is linear in x ∈ [0, 1]
 
 from __future__ import annotations
 
-from proofs_check import alg1_l1_median as l1
-from proofs_check import framework as fw
+from . import alg1_l1_median as l1
+from . import framework as fw
 
 MEANS = (0.9, 0.3)
 ESTIMATOR = "l1argmax"

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 
 MEANS = (0.9, 0.6)
 CONTROL = "addhalf"  # the squared-loss mean: R_T/T decreases (the mutation tests it instead)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from proofs_check import framework as fw
+from . import framework as fw
 
 
 def linear_means(num_arms: int, hi: float = 0.9, lo: float = 0.1) -> np.ndarray:

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 from sern_jax import theory as th
 
 ALPHA = 0.05

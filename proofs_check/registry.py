@@ -40,7 +40,7 @@ NAMES = (
 def get(name: str):
     if name not in NAMES:
         raise ValueError(f"unknown check {name!r}; choose from {', '.join(NAMES)}")
-    return importlib.import_module(f"proofs_check.{name}").CHECK
+    return importlib.import_module(f"{__package__}.{name}").CHECK
 
 
 def all_checks(only=None):

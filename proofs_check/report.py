@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from proofs_check import framework as fw
+from . import framework as fw
 
 
 def _ok(r) -> str:

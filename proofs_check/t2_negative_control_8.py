@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from proofs_check import framework as fw
+from . import framework as fw
 from sern_jax import theory as th
 
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 from sern_jax import theory as th
 
 

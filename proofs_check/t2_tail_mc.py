@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from proofs_check import framework as fw
+from . import framework as fw
 from sern_jax import theory as th
 
 MEANS = (0.8, 0.3)

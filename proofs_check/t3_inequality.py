@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 
 
 def simulate(ctx):

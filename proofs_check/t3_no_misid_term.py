@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 
 AS_ORACLES = ("adv", "rademacher")  # almost-sure A3: the per-round argument applies
 

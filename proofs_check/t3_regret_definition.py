@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from proofs_check import framework as fw
+from . import framework as fw
 
 MEANS = np.array([[0.9, 0.1], [0.1, 0.9]])
 

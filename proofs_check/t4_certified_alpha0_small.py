@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 from sern_jax import theory as th
 
 # (alpha0, p, Delta): the audit's two instances; r = (1, 1 - Delta), adv oracle with beta = 1.

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 from sern_jax import theory as th
 
 MEANS = (0.8, 0.3)  # a flip of a* (to 0.2) is a strict misidentification, no ties

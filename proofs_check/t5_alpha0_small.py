@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from proofs_check import common
-from proofs_check import framework as fw
+from . import common
+from . import framework as fw
 from sern_jax import theory as th
 
 MEANS = (1.0, 0.9)

@@ -9,8 +9,12 @@ import json
 
 import pytest
 
-from proofs_check import framework, registry
 from sern_jax.commands import check as cli
+from sern_jax.commands._scripts import script_module
+
+# the modules `sern check` uses (sern_jax.proofs_check installed), so the cached runs are shared
+framework = script_module("proofs_check", "framework")
+registry = script_module("proofs_check", "registry")
 
 
 def _args(tmp, **kw):
@@ -96,7 +100,7 @@ def test_cells_and_verdict_logic():
 
 def test_figures_from_saved_results(quick_run):
     """figures/make_theory_figs draws from the saved figure_data.json alone."""
-    from figures import make_theory_figs
+    make_theory_figs = script_module("figures", "make_theory_figs")
 
     _, _, run_dir = quick_run
     made = make_theory_figs.make_all(run_dir)

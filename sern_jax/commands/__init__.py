@@ -8,6 +8,7 @@ their functions to the commands.
 
 * ``main``: the dispatcher (``sern``; the console script is ``sern_jax.commands.main:main``);
 * ``regret``: ``sern regret``; ``check``: ``sern check``; ``reproduce``: ``sern reproduce``;
+* ``experiment``: ``sern experiment NAME`` (the scripts of ``experiments/``);
 * ``bench_bandit``, ``bench_grasp``: ``sern bench bandit|grasp``;
 * ``grasp_show``: ``sern grasp show``; ``grasp_learn``: ``sern grasp
   dataset|pretrain|screen|learn``.

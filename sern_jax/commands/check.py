@@ -82,7 +82,9 @@ def _validate(args) -> None:
 
 def run(args) -> int:
     """Entry point of ``sern check``; returns the exit status."""
-    from proofs_check import registry
+    from sern_jax.commands._scripts import script_module
+
+    registry = script_module("proofs_check", "registry")
 
     _validate(args)
     if args.list:
@@ -94,8 +96,8 @@ def run(args) -> int:
 
     from tqdm import tqdm
 
-    from proofs_check import framework as fw
-    from proofs_check import report
+    fw = script_module("proofs_check", "framework")
+    report = script_module("proofs_check", "report")
     from sern_jax import io
 
     name = args.name or ("check-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -136,8 +138,7 @@ def run(args) -> int:
     figs_note = ""
     if not args.no_figures:
         try:
-            from figures import make_theory_figs
-
+            make_theory_figs = script_module("figures", "make_theory_figs")
             made = make_theory_figs.make_all(run_dir)
             figs_note = f", {len(made)} figures"
         except Exception as exc:  # figures must never hide the verdicts

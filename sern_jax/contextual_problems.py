@@ -77,6 +77,7 @@ class ContextualBandit(NamedTuple):
     reward_range: tuple  # (lo, hi): scale_reward maps it onto [0, 1]
     arm_means: np.ndarray  # [K] float64 E_x r_a(x), exact (the paper's regret uses max of it)
     gap2: float | None  # Assumption 1's Δ2 = min_x (best − second best), where it is > 0
+    contexts: np.ndarray | None = None  # [M, d] the finite problem's contexts (else None)
 
     def scale_reward(self, reward: Array) -> Array:
         """Rewards in the problem's units -> [0, 1] (what the learners fit)."""
@@ -239,7 +240,8 @@ def finite_from_table(means, features, dtype=jnp.float32, gap2=None) -> Contextu
         name=f"finite(M={m}, K={k})", num_arms=k, context_dim=features.shape[1],
         sample_context=sample_context, expected_rewards=expected_rewards,
         sample_rewards=sample_rewards, reward_range=(0.0, 1.0),
-        arm_means=means.mean(axis=0), gap2=gap2 if gap2 > 0 else None)
+        arm_means=means.mean(axis=0), gap2=gap2 if gap2 > 0 else None,
+        contexts=np.asarray(feats, np.float64))
 
 
 # ----------------------------------------------------------------------------- linear

@@ -80,7 +80,9 @@ class NeuralRunConfig:
       update_every: E, decisions per phase; the learner updates after each phase.
       num_checkpoints: requested size of the log grid of phase ends (duplicates removed).
       diagnostics: also accumulate the estimator's error at the chosen and at the best arm
-        and (n_a + 1)^{-1/2} sums (Assumption 3 / Theorem 3 ingredients, :class:`NeuralDiag`).
+        and (n_a + 1)^{-1/2} sums (Assumption 3 / Theorem 3 ingredients, :class:`NeuralDiag`),
+        and, on a problem with finitely many contexts, the estimator's error on every
+        (context, arm) at each checkpoint beside the pulls n_{s,a} (Assumption 3 per context).
     """
 
     horizon: int = 1000
@@ -100,6 +102,8 @@ class NeuralDiag(NamedTuple):
     err_best: Array  # Σ_t |r̂_{a*_t}(x_t) − r_{a*_t}(x_t)|, a*_t = argmax_a r_a(x_t)
     err_rb: Array  # Σ_t Σ_a π_t(a) |r̂_a(x_t) − r_a(x_t)|
     inv_sqrt_chosen: Array  # Σ_t (n_{a_t}(phase start) + 1)^{-1/2}
+    table_err: Array  # [G, M, K] |r̂_a(s) − r_a(s)| at the checkpoint (M = 0: no table)
+    table_counts: Array  # [G, M, K] int32 n_{s,a}: pulls of arm a in context s so far
 
 
 class NeuralRunOutput(NamedTuple):
@@ -179,6 +183,7 @@ class _Carry(NamedTuple):
     comp_err: Array  # [K]
     min_prob: Array  # []
     diag: Array  # [4] or [0] (Kahan-free: O(T) terms of size <= 1, far below 2^24)
+    table_counts: Array  # [M, K] int32 (M = 0 without diagnostics or a finite problem)
 
 
 def _empty_core_set(problem: ContextualBandit) -> base.Data:
@@ -207,7 +212,11 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
     ends = phases.astype(np.int32)
     mu_star = float(np.max(problem.arm_means))
     lo, hi = problem.reward_range
-    num_diag = len(NeuralDiag._fields) if config.diagnostics else 0
+    num_diag = 4 if config.diagnostics else 0
+    table = (problem.contexts if config.diagnostics and problem.contexts is not None
+             else np.zeros((0, d)))
+    num_table = table.shape[0]
+    table_x = jnp.asarray(table, jnp.float32)  # [M, d]
     predict = learner.predict or base.network_predict(model)
     core = _empty_core_set(problem)
     theta_shape = jax.eval_shape(model.init, jax.random.key(0))
@@ -258,11 +267,16 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
             else:
                 diag = ()
             reward = problem.scale_reward(rewards[a])
-            return z[a], action, reward, probs, increments, diag
+            if num_table:
+                ctx = jnp.argmin(jnp.sum(jnp.abs(table_x - x[None, :]), axis=1))
+            else:
+                ctx = jnp.zeros((), jnp.int32)
+            return z[a], action, reward, probs, increments, diag, ctx
 
         def phase(p, carry: _Carry) -> _Carry:
             ts = p * e + jnp.arange(e)
-            z, action, reward, probs, inc, diag = jax.vmap(decide, (None, 0))(carry.state, ts)
+            z, action, reward, probs, inc, diag, ctx = jax.vmap(decide, (None, 0))(
+                carry.state, ts)
             batch = base.Batch(inputs=(z,), action=action.astype(jnp.int32), reward=reward)
             state = learner.update(jax.random.fold_in(key_update, p), carry.state, batch)
             sums, sums_err = kahan_add(carry.sums, carry.sums_err, jnp.sum(inc, axis=0))
@@ -274,23 +288,40 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
                 new_diag = carry.diag + jnp.stack([
                     jnp.sum(diag[0]), jnp.sum(diag[1]), jnp.sum(diag[2]),
                     jnp.sum(inv_sqrt[jnp.maximum(action, 0)])])
+            table_counts = carry.table_counts
+            if num_table:
+                table_counts = table_counts.at[ctx].add(chosen)
             return _Carry(state, sums, sums_err, carry.counts + jnp.sum(chosen, axis=0),
                           comp, comp_err, jnp.minimum(carry.min_prob, jnp.min(probs)),
-                          new_diag)
+                          new_diag, table_counts)
+
+        def table_errors(state):
+            """|r̂ − r| [M, K] on every context (scaled units) with the current state."""
+            def one(x):
+                z = jnp.concatenate([jnp.broadcast_to(x, (num_arms, d)), eye], axis=1)
+                obs = base.Obs(inputs=(z,), valid=jnp.ones((num_arms,), bool),
+                               u=jnp.zeros((), jnp.float32), t=jnp.zeros((), jnp.int32))
+                return jnp.abs(predict(state, obs)
+                               - problem.scale_reward(problem.expected_rewards(x)))
+            return jax.vmap(one)(table_x)
 
         def segment(carry: _Carry, bounds):
             lo_p, hi_p = bounds
             carry = jax.lax.fori_loop(lo_p, hi_p, phase, carry)
+            errs = (table_errors(carry.state) if num_table
+                    else jnp.zeros((0, num_arms), jnp.float32))
             return carry, (carry.sums - carry.sums_err, carry.counts,
-                           carry.comp - carry.comp_err, carry.min_prob, carry.diag)
+                           carry.comp - carry.comp_err, carry.min_prob, carry.diag,
+                           errs, carry.table_counts)
 
         carry0 = _Carry(state0, jnp.zeros((4,), jnp.float32), jnp.zeros((4,), jnp.float32),
                         jnp.zeros((num_arms,), jnp.int32), jnp.zeros((num_arms,), jnp.float32),
                         jnp.zeros((num_arms,), jnp.float32), jnp.ones((), jnp.float32),
-                        jnp.zeros((num_diag,), jnp.float32))
-        _, (sums, counts, comp, min_prob, diag) = jax.lax.scan(
+                        jnp.zeros((num_diag,), jnp.float32),
+                        jnp.zeros((num_table, num_arms), jnp.int32))
+        _, (sums, counts, comp, min_prob, diag, errs, tcounts) = jax.lax.scan(
             segment, carry0, (jnp.asarray(starts), jnp.asarray(ends)))
-        diag_out = (NeuralDiag(*[diag[:, i] for i in range(num_diag)])
+        diag_out = (NeuralDiag(*[diag[:, i] for i in range(num_diag)], errs, tcounts)
                     if config.diagnostics else None)
         return NeuralRunOutput(regret=sums[:, 0], regret_paper=sums[:, 1],
                                regret_rb=sums[:, 2], regret_rb_paper=sums[:, 3],

@@ -100,3 +100,19 @@ def test_bad_input_raises_before_compiling():
         wrong = networks.mlp_model(5, 3, (4,))
         nr.make_run(nr.NeuralRunConfig(horizon=40, update_every=10), problem,
                     registry.make("greedy", wrong, train), wrong)
+
+
+def test_diagnostics_per_context_table():
+    # n_{s,a} sums to N_a over contexts; the oracle's error is 0 everywhere; counts are whole
+    problem = cp.finite(jax.random.key(1), num_contexts=3, num_arms=2, gap=0.3, context_dim=2)
+    model = networks.oracle_model(problem)
+    train = base.TrainConfig(horizon=40, fit_steps=1, batch_size=4)
+    learner = registry.make("sern", model, train, {"alpha": 0.3})
+    cfg = nr.NeuralRunConfig(horizon=40, update_every=10, num_checkpoints=3, diagnostics=True)
+    out = nr.run_seeds(nr.make_run(cfg, problem, learner, model), 0, 2, workers=1)
+    d = out.diag
+    assert d.table_err.shape == (2, 3, 3, 2) and d.table_counts.shape == (2, 3, 3, 2)
+    np.testing.assert_array_equal(d.table_counts.sum(axis=2), out.counts)
+    np.testing.assert_allclose(d.table_err, 0.0, atol=1e-6)
+    np.testing.assert_allclose(d.err_chosen, 0.0, atol=1e-5)
+    assert np.all(np.diff(d.inv_sqrt_chosen, axis=1) > 0)

@@ -9,7 +9,9 @@ first use, like ``from sern_jax import executor``.
   exact fast runner for SERN softmax with local estimators;
 * ``executor``: ``run_seeds`` over thousands of seeds (chunks, threads, meshes);
 * ``theory``, ``stats``: closed forms of Theorems 1–5; intervals and Holm;
-* ``sharding``, ``io``: device meshes; run directories and checkpoints.
+* ``sharding``, ``io``: device meshes; run directories and checkpoints;
+* ``timing``, ``benchmarks``: the timing helper; the bandit benchmark and its NumPy reference
+  (``sern bench bandit``).
 
 The grasp layer (``sern_jax.grasp``) imports mujoco, mjx and flax and is not imported here.
 """
@@ -22,13 +24,15 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _MODULES = ("types", "policies", "schedules", "estimators", "problems", "simulate",
-            "fast_softmax", "executor", "theory", "stats", "sharding", "io")
+            "fast_softmax", "executor", "theory", "stats", "sharding", "io", "timing",
+            "benchmarks")
 
 __all__ = ["__version__", *_MODULES]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the modules load lazily
-    from sern_jax import (estimators, executor, fast_softmax, io, policies, problems,  # noqa: F401
-                          schedules, sharding, simulate, stats, theory, types)
+    from sern_jax import (benchmarks, estimators, executor, fast_softmax, io,  # noqa: F401
+                          policies, problems, schedules, sharding, simulate, stats, theory,
+                          timing, types)
 
 
 def __getattr__(name: str):

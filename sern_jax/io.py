@@ -67,6 +67,7 @@ __all__ = [
     "RunLockedError",
     "LOCK_FILE",
     "run_metadata",
+    "machine",
     "to_jsonable",
 ]
 
@@ -429,6 +430,44 @@ def _git_commit() -> str | None:
         return None
 
 
+def _cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo`` on Linux), else what ``platform`` knows."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine(*, devices: bool = False) -> dict[str, Any]:
+    """The machine a figure was measured on: the one machine-description helper.
+
+    Keys: ``cpu`` (model name), ``processor``, ``machine`` (architecture), ``cpu_count``,
+    ``system``, ``platform``, ``python``, ``load_average_1m``; with ``devices=True`` also
+    ``jax_backend`` and ``jax_devices`` (imports jax). Used by :func:`run_metadata` (its
+    ``host``) and by the benchmarks' ``machine`` field.
+    """
+    info: dict[str, Any] = {
+        "cpu": _cpu_model(),
+        "processor": platform.processor() or platform.machine(),
+        "machine": platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "system": platform.system(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "load_average_1m": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
+    }
+    if devices:
+        import jax
+
+        info["jax_backend"] = jax.default_backend()
+        info["jax_devices"] = [str(d) for d in jax.devices()]
+    return info
+
+
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """Versions, git commit, JAX flags and devices, host, time: what a run was made with."""
     import importlib.metadata as md
@@ -444,12 +483,7 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
         "versions": versions,
         "python": platform.python_version(),
         "git_commit": _git_commit(),
-        "host": {
-            "machine": platform.machine(),
-            "processor": platform.processor() or None,
-            "cpu_count": os.cpu_count(),
-            "system": platform.system(),
-        },
+        "host": machine(),
         "env": {k: os.environ.get(k) for k in ("XLA_FLAGS", "JAX_PLATFORMS", "MUJOCO_GL")},
     }
     try:

@@ -112,7 +112,8 @@ def _load(path: str) -> Theta0:
     template = network.init(jax.random.key(0))
     params = serialization.from_bytes(template, blob)
     params = jax.tree.map(jnp.asarray, params)
-    core = io.load_npz(root / CORE_FILE)
+    core = io.load_npz(root / CORE_FILE, advice="restore it (reinstall sern_jax, or rerun "
+                       "`sern grasp pretrain --install`), or pass another --theta0")
     screen = io.load_json(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
     return Theta0(network, params, core, manifest, digest[:16], screen)
 

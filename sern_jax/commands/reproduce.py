@@ -122,7 +122,8 @@ def _run_locked(args, out, theta0, size, hard, learn_args, *, check_run, regret_
                      size, timings, args.quick)
     io.save_text(out / "report.md", report)
     io.save_json(out / "metadata.json", io.run_metadata(timings=timings, quick=args.quick))
-    print(_summary(check_doc, check_status, regret_dir, table, timings, out))
+    print(_summary(check_doc, check_status, regret_dir, table, timings, out,
+                   learn_dir=out / "learn"))
     return 0 if check_status == 0 else 1
 
 
@@ -145,16 +146,43 @@ def _rel(path: Path, root: Path) -> str:
     return str(Path(path).resolve().relative_to(root.resolve()))
 
 
-def _sern_vs(table: list[dict], peer: str) -> tuple[int, int]:
-    """Objects where SERN's final round beats / trails the peer's (paper evaluation)."""
-    by = {(r["object"], r["policy"]): r for r in table}
-    wins = losses = 0
-    for (obj, pol), r in by.items():
-        if pol == "sern" and (obj, peer) in by:
-            d = r["rounds"][-1] - by[(obj, peer)]["rounds"][-1]
-            wins += d > 0
-            losses += d < 0
-    return wins, losses
+def _paired_lines(learn_dir: Path) -> list[str]:
+    """The summary's lead: SERN − each peer in the final round, pooled over the objects per
+    seed, with Student-t intervals over the seeds and Holm over every difference listed
+    (both evaluations, both peers). Win counts on unresolved differences are not evidence
+    and are not printed."""
+    import numpy as np
+
+    from sern_jax import io, stats
+
+    res = io.load_npz(learn_dir / "results.npz")
+    policies = io.load_json(learn_dir / "config.json")["config"]["policies"]
+    if "sern" not in policies or len(policies) < 2:
+        return []
+    s = policies.index("sern")
+    evals = [("low-variance evaluation", res["lowvar_eval"]),
+             ("5-grasp evaluation", res["paper_eval"])]
+    evals = [(n, a) for n, a in evals if np.isfinite(a[-1]).all()]
+    names, diffs = [], []
+    for label, a in evals:
+        pooled = a[-1].mean(0)  # [Q, S]: final round, mean over objects, per seed
+        for q, peer in enumerate(policies):
+            if q != s:
+                names.append(f"SERN − {peer}, {label}")
+                diffs.append(100.0 * (pooled[s] - pooled[q]))
+    num_s = len(diffs[0]) if diffs else 0
+    if num_s < 2:
+        return [f"grasp learning: {num_s} seed: no interval for SERN − peer (needs >= 2)"]
+    rows = stats.paired_differences(np.stack(diffs), names=names, level=0.95)
+    num_o = res["paper_eval"].shape[1]
+    lines = [f"grasp learning: SERN − peer, final round, mean over {num_o} objects, paired "
+             f"over {num_s} seeds (95 % Student-t intervals; Holm over the {len(rows)} "
+             "differences listed):"]
+    for r in rows:
+        verdict = "sign resolved" if r.resolved else "not resolved after Holm"
+        lines.append(f"                {r.name}: {r.mean:+.1f} ± {r.half:.1f} points, "
+                     f"Holm p = {r.pvalue_holm:.2f}: {verdict}")
+    return lines
 
 
 def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, size, timings,
@@ -192,7 +220,8 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
     return "\n".join(lines) + "\n"
 
 
-def _summary(check_doc, check_status, regret_dir, table, timings, out) -> str:
+def _summary(check_doc, check_status, regret_dir, table, timings, out,
+             learn_dir: Path | None = None) -> str:
     results = _checks(check_doc)
     ok = sum(1 for r in results if r.get("ok"))
     summary = json.loads((Path(regret_dir) / "summary.json").read_text())
@@ -200,17 +229,14 @@ def _summary(check_doc, check_status, regret_dir, table, timings, out) -> str:
              f"theory checks : {ok}/{len(results)} verdicts as expected"
              + ("" if check_status == 0 else "  <-- NOT ALL AS EXPECTED"),
              f"regret curves : {_regret_line(summary)}"]
+    if learn_dir is not None and (Path(learn_dir) / "results.npz").exists():
+        lines += _paired_lines(Path(learn_dir))
     final = {}
     for r in table:
         final.setdefault(r["policy"], []).append(r["rounds"][-1])
-    lines.append("grasp learning: final-round greedy success, mean over objects: " + ", ".join(
-        f"{p} {sum(v) / len(v):.0f}%" for p, v in final.items()))
-    for peer in ("egreedy", "greedy"):
-        if peer in final and "sern" in final:
-            w, l = _sern_vs(table, peer)
-            lines.append(f"                SERN vs {peer}: better on {w}, worse on {l}, equal "
-                         f"on {len(final['sern']) - w - l} objects (5-grasp evaluation; see "
-                         "the paired figure for intervals)")
+    lines.append("                final-round greedy success, mean over objects (5-grasp "
+                 "evaluation): " + ", ".join(f"{p} {sum(v) / len(v):.0f}%"
+                                             for p, v in final.items()))
     lowvar = {}
     for r in table:
         if "lowvar_rounds" in r:

@@ -106,8 +106,6 @@ def test_reproduce_summary_helpers():
         {"object": "c", "policy": "sern", "rounds": [40.0, 60.0]},
         {"object": "c", "policy": "greedy", "rounds": [40.0, 60.0]},
     ]
-    assert reproduce._sern_vs(table, "greedy") == (1, 1)  # a better, b worse, c tied
-    assert reproduce._sern_vs(table, "egreedy") == (0, 0)
     summary = {"policies": {"sern": {"regret_T_mean": 12.34}, "ucb": {"regret_T_mean": 5}}}
     assert reproduce._regret_line(summary) == "sern R_T=12.3, ucb R_T=5.0"
     assert reproduce._regret_line({"policies": {"x": {}}}) == "see regret/report.md"
@@ -145,5 +143,38 @@ def test_reproduce_counts_the_checks_of_a_real_report(tmp_path):
               "lowvar_rounds": [30.0, 64.0]}]
     text = reproduce._summary(doc, 1, regret, table, {"check_s": 1.0}, tmp_path)
     assert "1/2 verdicts as expected" in text and "NOT ALL AS EXPECTED" in text
-    assert "SERN vs greedy: better on 1, worse on 0, equal on 0 objects" in text
+    assert "better on" not in text  # no win counts on unresolved differences
     assert "final round: sern 61%, greedy 64%" in text
+
+
+def test_reproduce_summary_leads_with_paired_t_intervals_and_holm(tmp_path):
+    import numpy as np
+    from scipy import stats as sps
+
+    from sern_jax import io
+
+    rng = np.random.default_rng(0)
+    r1, o, q, s = 3, 2, 3, 6  # rounds 0..2, 2 objects, 3 policies, 6 seeds
+    lowvar = rng.uniform(0.4, 0.9, (r1, o, q, s))
+    lowvar[-1, :, 0, :] = lowvar[-1, :, 2, :] + 0.10  # SERN clearly above greedy
+    paper = rng.integers(0, 6, (r1, o, q, s)) / 5.0
+    learn = tmp_path / "learn"
+    learn.mkdir()
+    io.save_npz(learn / "results.npz", paper_eval=paper, lowvar_eval=lowvar)
+    io.save_json(learn / "config.json", {"config": {"policies": ["sern", "egreedy", "greedy"]}})
+    doc = {"checks": [{"name": "a", "ok": True}]}
+    regret = tmp_path / "regret"
+    regret.mkdir()
+    (regret / "summary.json").write_text(json.dumps({"policies": {}}))
+    table = [{"object": "x", "policy": p, "rounds": [50.0]} for p in ("sern", "greedy")]
+    text = reproduce._summary(doc, 0, regret, table, {"check_s": 1.0}, tmp_path,
+                              learn_dir=learn)
+    lines = text.splitlines()
+    lead = next(i for i, ln in enumerate(lines) if ln.startswith("grasp learning"))
+    assert "Holm over the 4 differences" in lines[lead] and "Student-t" in lines[lead]
+    d = 100 * (lowvar[-1, :, 0, :] - lowvar[-1, :, 2, :]).mean(0)
+    half = sps.t.ppf(0.975, s - 1) * d.std(ddof=1) / np.sqrt(s)
+    want = f"SERN − greedy, low-variance evaluation: {d.mean():+.1f} ± {half:.1f} points"
+    row = next(ln for ln in lines if want in ln)
+    assert row.endswith(": sign resolved")
+    assert "better on" not in text

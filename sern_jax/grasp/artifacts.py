@@ -110,7 +110,12 @@ def _load(path: str) -> Theta0:
         raise ValueError(f"{root / THETA0_FILE} does not match its manifest (sha256 "
                          f"{digest[:16]} != {manifest['theta0_sha256'][:16]})")
     template = network.init(jax.random.key(0))
-    params = serialization.from_bytes(template, blob)
+    try:
+        params = serialization.from_bytes(template, blob)
+    except Exception as exc:  # noqa: BLE001 - msgpack/flax raise many types on bad bytes
+        raise ValueError(f"{root / THETA0_FILE} is damaged ({type(exc).__name__}); restore "
+                         "it (reinstall sern_jax, or rerun `sern grasp pretrain --install`), "
+                         "or pass another --theta0") from None
     params = jax.tree.map(jnp.asarray, params)
     core = io.load_npz(root / CORE_FILE, advice="restore it (reinstall sern_jax, or rerun "
                        "`sern grasp pretrain --install`), or pass another --theta0")

@@ -286,3 +286,21 @@ def test_install_copies_and_reloads(pretrained, tmp_path):
     theta0 = artifacts.load_theta0(dst)
     assert theta0.screen == {"rule": pretrain.HARD_RULE, "objects": []}
     assert theta0.fingerprint == artifacts.load_theta0(out).fingerprint
+
+
+@pytest.mark.parametrize("how", ["truncate", "empty", "random"])
+@pytest.mark.parametrize("name", ["core_set.npz", "theta0.msgpack"])
+def test_damaged_theta0_files_are_one_line(pretrained, tmp_path, name, how):
+    from sern_jax.grasp import artifacts
+
+    _, out, _, _ = pretrained
+    copy = tmp_path / "theta0"
+    shutil.copytree(out, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    manifest.pop("theta0_sha256", None)  # the msgpack's own check, not the manifest's
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    _damage(copy / name, how)
+    with pytest.raises(ValueError) as info:
+        artifacts.load_theta0(copy)
+    msg = str(info.value)
+    assert "\n" not in msg and str(copy / name) in msg and "--theta0" in msg

@@ -111,115 +111,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _colour(prob):
-    import matplotlib
-
-    return matplotlib.colormaps["RdYlGn"](prob)
-
-
-def _draw_candidates(path, depth, cands, prob, title, colour_label) -> None:
-    """Depth image with each valid candidate drawn as an open parallel jaw."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    fig, ax = plt.subplots(figsize=(7.2, 6.0), dpi=120)
-    finite = depth[np.isfinite(depth)]
-    im = ax.imshow(depth, cmap="gray_r", vmin=finite.min(), vmax=finite.max())
-    cbar_depth = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
-    cbar_depth.set_label("depth (m)")
-    valid = np.asarray(cands.valid)
-    ends = np.asarray(cands.endpoints)  # [K, 2, 2] (u, v)
-    order = np.argsort(np.where(valid, prob, -1.0))  # best drawn last, on top
-    for k in order:
-        if not valid[k]:
-            continue
-        p1, p2 = ends[k]
-        axis = p2 - p1
-        length = np.linalg.norm(axis)
-        if length == 0:
-            continue
-        axis = axis / length
-        perp = np.array([-axis[1], axis[0]])
-        colour = _colour(float(prob[k]))
-        ax.plot(*np.stack([p1, p2]).T, color=colour, lw=0.9, alpha=0.9)
-        for p, out in ((p1, -1.0), (p2, 1.0)):
-            jaw = p + out * 1.5 * axis  # the jaw sits just outside its contact
-            bar = np.stack([jaw - 2.5 * perp, jaw + 2.5 * perp])
-            ax.plot(*bar.T, color=colour, lw=2.2, solid_capstyle="butt")
-    sm = matplotlib.cm.ScalarMappable(
-        cmap="RdYlGn", norm=matplotlib.colors.Normalize(0, 1)
-    )
-    cbar = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.10, location="left")
-    cbar.set_label(colour_label)
-    # Zoom on the object: everything nearer than the table (the image's farthest depth).
-    rows, cols = np.nonzero(depth < finite.max() - 2e-3)
-    if rows.size:
-        pad = 10
-        ax.set_xlim(
-            max(cols.min() - pad, 0) - 0.5,
-            min(cols.max() + pad, depth.shape[1] - 1) + 0.5,
-        )
-        ax.set_ylim(
-            min(rows.max() + pad, depth.shape[0] - 1) + 0.5,
-            max(rows.min() - pad, 0) - 0.5,
-        )
-    ax.set_title(title, fontsize=9)
-    ax.set_xlabel("u (px)  [image right = world +x]")
-    ax.set_ylabel("v (px)  [image down = world -y]")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-
-
-def _render_scene(path, model, grasp, title) -> None:
-    """Oblique MuJoCo renders: the scene, and the gripper open at `grasp`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import mujoco
-    import numpy as np
-
-    from sern_jax.grasp import scene as scene_lib
-
-    ids = scene_lib.scene_ids(model)
-    data = scene_lib.initial_data(model)
-    option = mujoco.MjvOption()
-    option.geomgroup[scene_lib.GROUP_GRIPPER] = (
-        0  # the parked gripper would cast a shadow
-    )
-    renderer = mujoco.Renderer(model, 480, 640)
-    try:
-        renderer.update_scene(data, camera="view", scene_option=option)
-        plain = renderer.render().copy()
-        option.geomgroup[scene_lib.GROUP_GRIPPER] = 1
-        posed = None
-        if grasp is not None:
-            x, y, z, theta = (float(v) for v in grasp)
-            for adr, v in zip(ids.palm_qpos, (x, y, z + scene_lib.FINGER_DROP, theta)):
-                data.qpos[adr] = v
-            mujoco.mj_kinematics(model, data)
-            renderer.update_scene(data, camera="view", scene_option=option)
-            posed = renderer.render().copy()
-    finally:
-        renderer.close()
-    panels = [("scene (camera 'view')", plain)]
-    if posed is not None:
-        panels.append(("gripper open at the best candidate", posed))
-    fig, axes = plt.subplots(1, len(panels), figsize=(6.4 * len(panels), 5.0), dpi=110)
-    for ax, (name, img) in zip(np.atleast_1d(axes), panels):
-        ax.imshow(img)
-        ax.set_title(name, fontsize=9)
-        ax.axis("off")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-
-
 def import_mjx_quietly() -> None:
     """Imports ``mujoco.mjx`` (through ``sern_jax.grasp._mjx``) dropping its "Failed to import
     warp / mujoco_warp" notices (the optional warp backend is not used); other output passes."""
@@ -239,18 +130,13 @@ _MAX_TRIALS = 4096  # 64 candidates x 4096 trials = 262,144 grasps: minutes, ~1 
 
 def run(args) -> int:
     """Entry point of ``sern grasp show``; returns the exit code."""
-    if args.gl != "auto":
-        os.environ["MUJOCO_GL"] = args.gl
-    elif "MUJOCO_GL" not in os.environ and sys.platform.startswith("linux"):
-        os.environ["MUJOCO_GL"] = "egl"
+    from sern_jax.grasp import pictures  # imports mujoco without OpenGL
 
-    try:  # MUJOCO_GL is read when mujoco is imported: a missing backend fails right here
-        import mujoco  # noqa: F401
-    except Exception as exc:  # noqa: BLE001 - PyOpenGL raises AttributeError, OSError, ...
-        raise ValueError(
-            f"--gl {args.gl}: MuJoCo cannot load the OpenGL backend "
-            f"MUJOCO_GL={os.environ.get('MUJOCO_GL')} ({type(exc).__name__}: {exc}); install "
-            f"it (osmesa: libosmesa6) or choose another --gl") from None
+    if not args.no_render and not args.list:  # the backend is loaded and checked before any work
+        try:
+            pictures.use_gl(None if args.gl == "auto" else args.gl)
+        except RuntimeError as exc:
+            raise ValueError(f"--gl {args.gl}: {exc} (--no-render)") from None
     import_mjx_quietly()
     from sern_jax.grasp import objects as objects_lib
 
@@ -331,7 +217,7 @@ def run(args) -> int:
         f"{spec.name} (seed {args.seed}): {int(valid.sum())} valid of {len(valid)} candidates"
         + ("" if backend else "; coloured by validity only")
     )
-    _draw_candidates(
+    pictures.draw_candidates(
         figures / "depth_candidates.png", depth, cands, prob, title, colour_label
     )
     written = [figures / "depth_candidates.png"]
@@ -342,7 +228,7 @@ def run(args) -> int:
     status = 0
     if not args.no_render:
         try:
-            _render_scene(
+            pictures.render_scene(
                 figures / "scene.png", model, best, f"{spec.name} (seed {args.seed})"
             )
             written.append(figures / "scene.png")

@@ -76,3 +76,53 @@ def test_show_writes_pictures_and_results(tmp_path):
     assert np.all((prob[valid] >= 0) & (prob[valid] <= 1))
     assert np.all(prob[~valid] == 0)
     assert (out / "config.json").exists() and (out / "metadata.json").exists()
+
+
+def _sern(argv, env_extra, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    env.update(env_extra)
+    code = f"import sys; from sern_jax.commands.main import main; sys.exit(main({argv!r}))"
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, timeout=600, cwd=tmp_path)
+
+
+def test_commands_that_render_nothing_ignore_an_unloadable_mujoco_gl(tmp_path):
+    # MUJOCO_GL=bogus makes a plain `import mujoco` raise (as MUJOCO_GL=egl does where no EGL
+    # loads); the grasp layer imports mujoco with OpenGL off and leaves the variable as it was.
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    env["MUJOCO_GL"] = "bogus"
+    plain = subprocess.run([sys.executable, "-c", "import mujoco"], env=env,
+                           capture_output=True, text=True, timeout=300)
+    assert plain.returncode != 0 and "MUJOCO_GL" in plain.stderr  # the control
+    script = ("import os\n"
+              "from sern_jax.grasp import objects, scene, sim\n"
+              "model = scene.build_scene(objects.make_object('small_box'), seed=0)\n"
+              "res = sim.GraspSimulator(model, 'native', num_threads=1).run_trials(\n"
+              "    scene.centred_grasp(model)[None], sim.sample_noise(__import__('jax').random.key(0), 1))\n"
+              "assert res.success.shape == (1,)\n"
+              "assert os.environ['MUJOCO_GL'] == 'bogus'\n")
+    res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = tmp_path / "norender"
+    res = _sern(["grasp", "show", "small_box", "--trials", "0", "--no-render", "--out",
+                 str(out)], {"MUJOCO_GL": "bogus"}, tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert (out / "figures" / "depth_candidates.png").exists()
+    assert not (out / "figures" / "scene.png").exists()
+
+
+@pytest.mark.parametrize("env_extra,hint", [
+    ({"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "osmesa"}, "--gl osmesa"),  # EGL cannot load
+    ({"MUJOCO_GL": "bogus"}, "pick one of egl, osmesa, glfw"),
+])
+def test_rendering_without_a_loadable_backend_is_one_line_before_any_work(env_extra, hint,
+                                                                          tmp_path):
+    out = tmp_path / "run"
+    res = _sern(["grasp", "show", "small_box", "--trials", "0", "--out", str(out)], env_extra,
+                tmp_path)
+    assert res.returncode == 2, res.stderr[-2000:]
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert "--gl auto" in lines[0] and hint in lines[0] and "--no-render" in lines[0]
+    assert not out.exists()

@@ -11,7 +11,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable, Mapping, NamedTuple
 
-from sern_jax.learners import base, egreedy, greedy, sern
+from sern_jax.learners import (base, decaying, egreedy, ensemble, greedy, neural_linear,
+                               neural_ucb, sern)
 
 __all__ = ["LearnerSpec", "LEARNERS", "names", "check_names", "hyperparameters",
            "make_config", "make"]
@@ -30,6 +31,23 @@ LEARNERS: dict[str, LearnerSpec] = {
     "egreedy": LearnerSpec(egreedy.egreedy, egreedy.EGreedyConfig,
                            "ε-greedy on r̂ (--epsilon)"),
     "greedy": LearnerSpec(greedy.greedy, greedy.GreedyConfig, "argmax r̂"),
+    # the baselines (issue 18): one module each, defaults from their papers
+    "neural_linucb": LearnerSpec(
+        neural_linear.neural_linucb, neural_linear.NeuralLinUCBConfig,
+        "Neural-Linear UCB on last-layer features (--lambda-prior, --a0, --b0, --ucb-width)"),
+    "neural_lints": LearnerSpec(
+        neural_linear.neural_lints, neural_linear.NeuralLinTSConfig,
+        "Neural-Linear Thompson sampling, Riquelme et al. 2018 (--lambda-prior, --a0, --b0)"),
+    "ensemble_ts": LearnerSpec(
+        ensemble.ensemble_ts, ensemble.EnsembleConfig,
+        "bootstrapped-ensemble Thompson sampling (--ensemble-size, --bootstrap, "
+        "--bootstrap-p)"),
+    "neural_ucb": LearnerSpec(neural_ucb.neural_ucb, neural_ucb.NeuralUCBConfig,
+                              "NeuralUCB, diagonal Z, Zhou et al. 2020 (--ucb-lambda, --nu)"),
+    "egreedy_decay": LearnerSpec(decaying.egreedy_decay, decaying.EGreedyDecayConfig,
+                                 "ε-greedy, ε_t = min(1, ε0/t) (--decay-epsilon0)"),
+    "sern_decay": LearnerSpec(decaying.sern_decay, decaying.SernDecayConfig,
+                              "softmax, α_t = α0/log2(1 + t) (--decay-alpha0)"),
 }
 
 

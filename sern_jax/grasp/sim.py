@@ -79,6 +79,7 @@ __all__ = [
     "sample_trial_noise",
     "sample_noise",
     "zero_noise",
+    "refine",
     "make_execute",
     "GraspSimulator",
     "agreement",
@@ -163,6 +164,18 @@ class TrialConfig:
             + self.shake_steps
             + self.hold_steps
         )
+
+
+def refine(config: TrialConfig, factor: int) -> TrialConfig:
+    """The same trial in physical time at a ``factor`` times smaller physics step: every
+    phase length (in steps) times ``factor``. Pair it with a scene built at
+    ``SceneConfig(timestep=timestep / factor)``; the time-step check
+    (``experiments/trial_checks.py timestep``) compares outcomes across factors."""
+    if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+        raise ValueError(f"factor must be an integer >= 1, got {factor!r}")
+    names = ("approach_steps", "settle_steps", "close_steps", "lift_steps", "shake_steps",
+             "hold_steps")
+    return dataclasses.replace(config, **{n: getattr(config, n) * int(factor) for n in names})
 
 
 class TrialNoise(NamedTuple):

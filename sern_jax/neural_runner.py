@@ -374,10 +374,13 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
     if workers > 1:  # compile once here: worker threads must not trace
         fn = fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype)).compile()
     result: list = [None] * len(starts)
+    # every chunk's keys made here, in the calling thread: worker threads only run the
+    # compiled program (no tracing or eager dispatch in threads)
+    keys = [seed_keys(root, chunk, int(first_seed) + start) for start in starts]
 
     def one(i: int):
         start = starts[i]
-        out = fn(seed_keys(root, chunk, int(first_seed) + start))
+        out = fn(keys[i])
         size = min(chunk, num_seeds - start)
         result[i] = jax.tree.map(lambda a: np.asarray(a)[:size], out)
         return size

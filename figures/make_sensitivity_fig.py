@@ -1,6 +1,6 @@
 """Heat maps of the sensitivity grid, from ``experiments.grasp_sensitivity``'s summary.json.
 
-Panels: SERN − greedy and SERN − ε-greedy (final-round low-variance success, pooled over
+Panels: SERN − greedy and SERN − ε-greedy (final-round fixed-pose success, pooled over
 the objects, mean over seeds, percentage points) per cell, each annotated with its 95 %
 Student-t half-width over seeds and a star where the sign is resolved after Holm over all
 the grid's comparisons; a third panel gives θ0's success in each world (round 0) and the
@@ -101,7 +101,7 @@ def make_figure(run_dir: str | Path, out: str | Path | None = None) -> Path:
                  fontsize=10)
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
     n = "/".join(str(s) for s in seeds)
-    fig.suptitle(f"Sensitivity of the final-round comparison (low-variance evaluation, pooled "
+    fig.suptitle(f"Sensitivity of the final-round comparison (fixed-pose evaluation, pooled "
                  f"over the hard set; {n} seeds; 95 % t intervals; * = resolved after Holm "
                  f"over all {2 * len(cells)} comparisons)", fontsize=9)
     fig.tight_layout()

@@ -22,21 +22,6 @@ def test_table_rows_carry_sd_and_se_beside_std():
     assert one["sd"] == [None, None] and one["se"] == [None, None]
 
 
-def test_paper_table1_values_are_standard_errors():
-    res = paper_table1.check()
-    s = res["statistics"]
-    assert res["cells"] == 75
-    # quoted in docs/RESULTS.md
-    assert res["means_on_grid"] == 59
-    assert s["se_sample"]["value_possible"] == 75
-    assert s["se_sample"]["jointly_with_mean"] == 56
-    assert s["sd_pop"]["value_possible"] == 12 and s["sd_pop"]["jointly_with_mean"] == 0
-    assert s["sd_sample"]["value_possible"] == 6 and s["sd_sample"]["jointly_with_mean"] == 0
-    assert s["se_pop"]["jointly_with_mean"] == 0
-    assert res["smallest_se_sample"][:3] == [0.0, 4.0, 4.9]
-    assert res["smallest_sd_pop"][:3] == [0.0, 8.0, 9.8]
-
-
 def test_possible_values_by_hand():
     # five seeds, one success more on one seed: rates (0, 0, 0, 0, 20) %:
     # mean 4, population SD sqrt(400 * 4/25) = 8, sample SD sqrt(80) = 8.94, SE 4.00

@@ -39,7 +39,7 @@ def make_figure(run_dir: str | Path) -> Path:
     ax.legend(fontsize=7)
     fig.tight_layout()
     out = run_dir / "forgetting.png"
-    fig.savefig(out, dpi=130)
+    fig.savefig(out, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return out
 

@@ -82,7 +82,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     out = [run_dir / "figures" / "success.png"]
     out[0].parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out[0], dpi=120)
+    fig.savefig(out[0], dpi=120, bbox_inches="tight")
     plt.close(fig)
 
     if "sern" in policies and len(policies) > 1 and seeds > 1:
@@ -114,6 +114,6 @@ def make_figures(run_dir: str | Path) -> list[Path]:
                      fontsize=9)
         fig.tight_layout()
         out.append(run_dir / "figures" / "paired.png")
-        fig.savefig(out[-1], dpi=120)
+        fig.savefig(out[-1], dpi=120, bbox_inches="tight")
         plt.close(fig)
     return out

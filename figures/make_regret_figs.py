@@ -56,7 +56,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     path = out_dir / "regret.png"
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
     written.append(path)
 
@@ -87,7 +87,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
         path = out_dir / "exploration.png"
-        fig.savefig(path, dpi=120)
+        fig.savefig(path, dpi=120, bbox_inches="tight")
         plt.close(fig)
         written.append(path)
     return written

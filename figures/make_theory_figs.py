@@ -28,7 +28,7 @@ def _plt():
 
 def _save(fig, path: Path, written: list) -> None:
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     written.append(path)
     import matplotlib.pyplot as plt
 
@@ -141,7 +141,7 @@ def fig_tstar(data, out, written):
         fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="log10 T* (B(T) < T)")
         fig.suptitle("Theorem 4: first T with B(T) < T (hatched rows: α0 < 1, where Theorem 4's "
                      "c is not justified by Theorem 1)", fontsize=10)
-        fig.savefig(out / f"tstar_heatmap_d2_{d2:g}.png", dpi=110)
+        fig.savefig(out / f"tstar_heatmap_d2_{d2:g}.png", dpi=110, bbox_inches="tight")
         written.append(out / f"tstar_heatmap_d2_{d2:g}.png")
         plt.close(fig)
 

@@ -44,7 +44,7 @@ def make_figure(run_dir: str | Path) -> Path:
                   f"{100 * t['delta2_zero_fraction_pooled']:.0f}%", fontsize=9)
     fig.tight_layout()
     out = run_dir / "theory_grasping.png"
-    fig.savefig(out, dpi=130)
+    fig.savefig(out, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return out
 

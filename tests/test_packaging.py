@@ -64,7 +64,11 @@ def test_outside_the_clone_only_sern_jax_imports():
         assert _scripts.script_package("experiments").__name__ == "sern_jax.experiments"
         assert "grasp_learning" in _scripts.experiment_names()
     """)
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env = dict(os.environ)
+    # an install by PYTHONPATH (pip --target) stays; the clone itself must not be on the path
+    keep = [p for p in env.get("PYTHONPATH", "").split(os.pathsep)
+            if p and Path(p).resolve() != ROOT]
+    env["PYTHONPATH"] = os.pathsep.join(keep)
     res = subprocess.run([sys.executable, "-c", script], cwd=ROOT.parent, env=env,
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr[-2000:]

@@ -6,18 +6,23 @@ candidate's success probability from M randomised native trials. Per object it r
 
 * ``mean_candidate``: mean success of the valid candidates over all poses (what a picker
   that cannot tell candidates apart gets; a proxy for a net trained elsewhere),
-* ``frac_poses_best_ge_0.8``: fraction of poses whose best candidate succeeds >= 0.8
-  (there is something to learn),
+* ``frac_poses_best_ge_0.8``: fraction of poses whose largest candidate frequency is
+  >= 0.8 (biased upward: the maximum of many noisy frequencies),
+* ``frac_poses_best_fresh_ge_0.8``: the same with each pose's best candidate (the argmax
+  of the screening trials) valued on M fresh, independent trials (there is something to
+  learn; the screen uses this one),
 * ``frac_candidates_ge_0.8``: fraction of valid candidates >= 0.8 (how rare good grasps
   are),
 * the spread: std, quartiles of the valid candidates' success, and the mean per-pose std.
 
 An object is a *screen candidate* when ``mean_candidate <= 0.5`` and
-``frac_poses_best_ge_0.8 >= 0.75``: good grasps exist in most poses but are a minority.
+``frac_poses_best_fresh_ge_0.8 >= 0.75``: good grasps exist in most poses but are a
+minority.
 
 Deterministic given ``--seed``: pose p of every object uses resting-pose seed
 ``1000 * seed + p``; its candidate and trial keys are ``fold_in(fold_in(key(seed), p), i)``
-for i = 0 (candidates), 1 (trials), so two objects see the same trial noise.
+for i = 0 (candidates), 1 (trials), 2 (the fresh trials of the best candidate), so two
+objects see the same trial noise.
 
 Usage::
 
@@ -96,8 +101,14 @@ def measure_object(spec, poses: int, trials: int, seed: int, num_threads=None,
                                      valid=valid)
             prob = np.asarray(est.prob, np.float64)
             nan = int(np.sum(est.nan_count))
+            best = int(np.argmax(np.where(valid, prob, -1.0)))
+            fresh = sim_lib.GraspSimulator(model, "native", num_threads=num_threads)\
+                .success_probability(jax.random.fold_in(kp, 2), cands.grasps[best][None],
+                                     trials)
+            best_fresh = float(fresh.prob[0])
         out["poses"].append({"pose_seed": pose_seed, "valid": valid.tolist(),
                              "prob": [round(float(v), 4) for v in prob],
+                             "best_fresh": round(best_fresh, 4) if valid.any() else 0.0,
                              "nan_trials": nan})
     out["seconds"] = round(time.perf_counter() - t0, 1)
     out.update(summarise(out["poses"]))
@@ -109,6 +120,7 @@ def summarise(pose_records) -> dict:
     probs = [np.asarray(r["prob"])[np.asarray(r["valid"], bool)] for r in pose_records]
     allp = np.concatenate(probs) if probs else np.zeros(0)
     best = np.array([p.max() if p.size else 0.0 for p in probs])
+    fresh = np.array([r.get("best_fresh", np.nan) for r in pose_records], np.float64)
     if allp.size == 0:
         return {"num_valid": 0}
     q1, med, q3 = np.quantile(allp, [0.25, 0.5, 0.75])
@@ -117,6 +129,7 @@ def summarise(pose_records) -> dict:
         "valid_per_pose_min": int(min(p.size for p in probs)),
         "mean_candidate": float(allp.mean()),
         "frac_poses_best_ge_0.8": float(np.mean(best >= GOOD)),
+        "frac_poses_best_fresh_ge_0.8": float(np.mean(fresh >= GOOD)),
         "frac_candidates_ge_0.8": float(np.mean(allp >= GOOD)),
         "best_per_pose": [round(float(b), 3) for b in best],
         "mean_per_pose": [round(float(p.mean()), 3) if p.size else None for p in probs],
@@ -126,7 +139,7 @@ def summarise(pose_records) -> dict:
         "nan_trials": int(sum(r["nan_trials"] for r in pose_records)),
     }
     s["screen_candidate"] = bool(s["mean_candidate"] <= 0.5
-                                 and s["frac_poses_best_ge_0.8"] >= 0.75)
+                                 and s["frac_poses_best_fresh_ge_0.8"] >= 0.75)
     return s
 
 
@@ -144,16 +157,18 @@ def _object_list(text: str) -> list[str]:
 
 
 def table(results) -> str:
-    rows = ["| object | mean cand. | poses best>=0.8 | cand. >=0.8 | std | quartiles | "
-            "valid | screen |", "|---|---|---|---|---|---|---|---|"]
+    rows = ["| object | mean cand. | poses max>=0.8 (biased) | poses best>=0.8 (fresh) | "
+            "cand. >=0.8 | std | quartiles | valid | screen |",
+            "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         if not r.get("num_valid"):
-            rows.append(f"| {r['object']} | no valid candidates | | | | | 0 | |")
+            rows.append(f"| {r['object']} | no valid candidates | | | | | | 0 | |")
             continue
         q = "/".join(f"{v:.2f}" for v in r["quartiles"])
         rows.append(
             f"| {r['object']} | {r['mean_candidate']:.2f} | "
-            f"{r['frac_poses_best_ge_0.8']:.2f} | {r['frac_candidates_ge_0.8']:.2f} | "
+            f"{r['frac_poses_best_ge_0.8']:.2f} | {r['frac_poses_best_fresh_ge_0.8']:.2f} | "
+            f"{r['frac_candidates_ge_0.8']:.2f} | "
             f"{r['std']:.2f} | {q} | {r['num_valid']} | "
             f"{'yes' if r['screen_candidate'] else ''} |")
     return "\n".join(rows)

@@ -99,8 +99,8 @@ class TrialConfig:
 
     Attributes:
       approach_height: start height of the grasp centre above the grasp, metres.
-      approach_steps / settle_steps / close_steps / lift_steps / shake_steps /
-        hold_steps: phase lengths in physics steps.
+      approach_steps: phase length in physics steps, as are settle_steps, close_steps,
+        lift_steps, shake_steps and hold_steps.
       close_target: finger target at the end of closing (< 0: squeeze at the force
         limit), metres.
       lift_height: palm lift, metres (>= 0.1).

@@ -33,12 +33,14 @@ __all__ = [
     "OneLineParser",
     "FLOAT32_TINY",
     "finite_float",
+    "float32_hyperparameters",
     "out_dir",
     "out_file",
     "locked_run_dir",
 ]
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)  # smallest normal float32, 1.1754944e-38
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # 3.4028235e38
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -63,7 +65,8 @@ def finite_float(value: float, flag: str, *, low: float | None = None,
     hi_text = "inf" if high is None else f"{high:g}"
     span = f"{'(' if low_open else '['}{lo_text}, {hi_text}{')' if high_open else ']'}"
     if not math.isfinite(value):
-        raise ValueError(f"{flag} must be a finite number in {span}, got {value!r}")
+        where = "" if low is None and high is None else f" in {span}"
+        raise ValueError(f"{flag} must be a finite number{where}, got {value!r}")
     if low is not None and (value < low or (low_open and value == low)):
         raise ValueError(f"{flag} must lie in {span}, got {value:g}")
     if high is not None and (value > high or (high_open and value == high)):
@@ -71,9 +74,21 @@ def finite_float(value: float, flag: str, *, low: float | None = None,
     if float32_normal and value != 0 and abs(value) < FLOAT32_TINY:
         raise ValueError(
             f"{flag} {value:g} is below float32's smallest normal number ({FLOAT32_TINY:.4g}): "
-            "it would be computed as 0 or lose its precision (softmax would return NaN); use "
-            f"a value >= {FLOAT32_TINY:.4g}")
+            "float32 arithmetic would make it 0 or a denormal (a temperature of 0 makes "
+            f"softmax NaN); use 0 or a value >= {FLOAT32_TINY:.4g}")
+    if float32_normal and abs(value) > FLOAT32_MAX:
+        raise ValueError(f"{flag} {value:g} is beyond float32's largest number "
+                         f"({FLOAT32_MAX:.4g}): it would be computed as infinity")
     return value
+
+
+def float32_hyperparameters(values: dict, flags: dict) -> None:
+    """Every float among ``values`` (name -> value) finite and representable in float32 as
+    0 or a normal number, named by ``flags`` (name -> flag): what the learners' float32
+    arithmetic needs whatever their own ranges (a learner's config checks those)."""
+    for name, value in values.items():
+        if isinstance(value, float):
+            finite_float(value, flags.get(name, name), float32_normal=True)
 
 
 def _first_existing(path: Path) -> Path:

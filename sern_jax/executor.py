@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sern_jax import estimators as est_lib
-from sern_jax import fast_softmax
+from sern_jax import fast_softmax, fast_thompson
 from sern_jax.simulate import (Diagnostics, RunConfig, RunOutput, RunParams, checkpoint_times,
                                make_run, seed_keys, validate)
 
@@ -162,7 +162,8 @@ def plan_run(
 
     ``runner="auto"`` takes :mod:`sern_jax.fast_softmax` whenever it reproduces
     :func:`make_run` (SERN softmax, one context, a local estimator, no diagnostics, α large
-    enough for its float type; see ``fast_softmax.supports``) and the general runner otherwise;
+    enough for its float type; see ``fast_softmax.supports``), :mod:`sern_jax.fast_thompson`
+    for Thompson sampling with one context and no diagnostics, and the general runner otherwise;
     ``"fast"`` insists on the fast runner (``ValueError`` if unsupported), ``"general"`` on
     :func:`make_run`. ``summary``: the plan's ``fn`` reduces over seeds on the device.
     """
@@ -170,10 +171,12 @@ def plan_run(
         raise ValueError(f"unknown runner {runner!r}; expected one of {RUNNERS}")
     if chunk_size is not None and (isinstance(chunk_size, bool) or int(chunk_size) < 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    supported = runner != "general" and fast_softmax.supports(config, params)
+    supported = runner != "general" and (fast_softmax.supports(config, params)
+                                         or fast_thompson.supports(config))
     if runner == "fast" and not supported:
         raise ValueError(
-            f"runner='fast' needs policy='softmax', one context, an estimator in "
+            f"runner='fast' needs policy='thompson' with one context and no diagnostics, or "
+            f"policy='softmax', one context, an estimator in "
             f"{est_lib.LOCAL_ESTIMATORS}, diagnostics=False and alpha >= "
             f"{fast_softmax.min_alpha(config.dtype)} ({config.dtype}); got policy="
             f"{config.policy!r}, estimator={config.estimator!r}, "
@@ -356,7 +359,9 @@ def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
                                           tuple(d.id for d in mesh.devices.flat))
     cache_key = (config, mesh_key, fast, inner, summary)
     if cache_key not in _RUNNER_CACHE:
-        if fast:
+        if fast and config.policy == "thompson":
+            batched = fast_thompson.make_batched(config, chunk=inner, mesh=mesh)
+        elif fast:
             batched = fast_softmax.make_batched(config, chunk=inner, mesh=mesh)
         else:
             batched = jax.vmap(make_run(config), in_axes=(0, None))

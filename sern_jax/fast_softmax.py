@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sern_jax import estimators as est_lib
+from sern_jax.prng import threefry2x32  # re-exported: the unrolled hash lives in prng
 from sern_jax import schedules
 from sern_jax import simulate as sim
 from sern_jax.types import Array, Key
@@ -61,8 +62,6 @@ __all__ = ["supports", "min_alpha", "make_fast_run", "make_batched", "chunk_layo
 
 DEFAULT_BLOCK = 64  # rounds between exact recomputations of the prefix sums
 DEFAULT_CPU_CHUNK = 256  # seeds per lax.map step on CPU: the state stays in L2
-
-_ROT = ((13, 15, 26, 6), (17, 29, 16, 24))
 
 
 def min_alpha(dtype: str) -> float:
@@ -96,32 +95,6 @@ def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool
 
 
 # ----------------------------------------------------------------------------- threefry
-
-
-def _rotl(x: Array, d: int) -> Array:
-    return (x << np.uint32(d)) | (x >> np.uint32(32 - d))
-
-
-def threefry2x32(k1: Array, k2: Array, x1: Array, x2: Array) -> tuple[Array, Array]:
-    """Threefry-2x32 (20 rounds), unrolled; bit-identical to JAX's ``threefry2x32_p``.
-
-    Args:
-      k1, k2: uint32 key words (broadcastable).
-      x1, x2: uint32 counter words (broadcastable).
-
-    Returns:
-      The two uint32 output words.
-    """
-    ks = (k1, k2, k1 ^ k2 ^ np.uint32(0x1BD11BDA))
-    x = [x1 + ks[0], x2 + ks[1]]
-    for i in range(5):
-        for r in _ROT[i % 2]:
-            x[0] = x[0] + x[1]
-            x[1] = _rotl(x[1], r)
-            x[1] = x[0] ^ x[1]
-        x[0] = x[0] + ks[(i + 1) % 3]
-        x[1] = x[1] + ks[(i + 2) % 3] + np.uint32(i + 1)
-    return x[0], x[1]
 
 
 def _fold_in(kd: Array, t: Array) -> tuple[Array, Array]:

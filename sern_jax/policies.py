@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sern_jax import prng
 from sern_jax.types import Array, Key
 
 __all__ = [
@@ -180,11 +181,14 @@ def thompson_probs(key: Key, counts: Array, sums: Array) -> Array:
       sums: [K] summed (Bernoulli) rewards per arm.
 
     Returns:
-      [K] one-hot of ``argmax_a θ_a`` with ``θ_a ~ Beta(1 + S_a, 1 + n_a − S_a)``.
+      [K] one-hot of ``argmax_a θ_a`` with ``θ_a ~ Beta(1 + S_a, 1 + n_a − S_a)``, drawn by
+      :func:`sern_jax.prng.sample_beta` (exact; closed form or Cheng's BB per arm, rejected
+      lanes retried alone; ``jax.random.beta``'s per-element rejection loop serialised the
+      lanes under ``vmap``).
     """
     a = 1.0 + sums
     b = 1.0 + counts.astype(sums.dtype) - sums
-    theta = jax.random.beta(key, a, b, dtype=sums.dtype)
+    theta = prng.sample_beta(key, a, b)
     return jax.nn.one_hot(jnp.argmax(theta), counts.shape[-1], dtype=sums.dtype)
 
 

@@ -1,0 +1,142 @@
+"""Counter-based random variates that vectorise: unrolled threefry and an exact Beta sampler.
+
+:func:`threefry2x32` is JAX's threefry-2x32 hash written out (bit-identical to
+``jax.random``'s; on CPU JAX lowers it to a rolled loop that does not fuse).
+
+:func:`sample_beta` draws Beta(a, b) for a, b ≥ 1 (Thompson sampling's Beta(1 + S, 1 + F)
+posteriors) *exactly*, in a form that suits ``vmap`` and SIMD lanes. ``jax.random.beta`` draws
+two Gammas by rejection in a ``while_loop`` per element, so under ``vmap`` every lane waits for
+the slowest one and each try re-derives keys (measured 0.039M seed-rounds/s for Thompson at
+K = 64 on 2 cores). Here:
+
+* min(a, b) = 1 has a closed form by inversion: Beta(1, b) = 1 − U^{1/b} and
+  Beta(a, 1) = U^{1/a};
+* min(a, b) > 1 uses Cheng's (1978) algorithm BB, the rejection sampler R's ``rbeta`` uses:
+  one pair of uniforms per try, a log and an exp, accepted with probability 0.80–0.96;
+* the uniforms of try ``i`` of lane ``j`` are ``threefry(key, (i, j))``: every (lane, try)
+  has its own independent bits, so a lane's sequence of tries does not depend on the others,
+  and the result is the first accepted try, as in the scalar algorithm: exact in distribution
+  (up to float rounding, like any sampler);
+* every lane runs try 0; only the rejected lanes keep the next tries (:func:`sample_beta`
+  loops while any lane is rejected; :mod:`sern_jax.fast_thompson` lets a seed whose lanes
+  are not all accepted retry in its next loop step while the others play on).
+
+Both forms give the same draws for the same key: lane ``j`` of a seed always takes its own
+tries ``0, 1, 2, …`` in order.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sern_jax.types import Array, Key
+
+__all__ = ["threefry2x32", "open_unit", "beta_try", "sample_beta"]
+
+_ROT = ((13, 15, 26, 6), (17, 29, 16, 24))
+_LOG4 = 1.3862944  # log 4 (Cheng's BB constants)
+_ONE_PLUS_LOG5 = 2.609438  # 1 + log 5
+
+
+def _rotl(x: Array, d: int) -> Array:
+    return (x << np.uint32(d)) | (x >> np.uint32(32 - d))
+
+
+def threefry2x32(k1: Array, k2: Array, x1: Array, x2: Array) -> tuple[Array, Array]:
+    """Threefry-2x32 (20 rounds), unrolled; bit-identical to JAX's ``threefry2x32_p``.
+
+    Args:
+      k1, k2: uint32 key words (broadcastable).
+      x1, x2: uint32 counter words (broadcastable).
+
+    Returns:
+      The two uint32 output words.
+    """
+    ks = (k1, k2, k1 ^ k2 ^ np.uint32(0x1BD11BDA))
+    x = [x1 + ks[0], x2 + ks[1]]
+    for i in range(5):
+        for r in _ROT[i % 2]:
+            x[0] = x[0] + x[1]
+            x[1] = _rotl(x[1], r)
+            x[1] = x[0] ^ x[1]
+        x[0] = x[0] + ks[(i + 1) % 3]
+        x[1] = x[1] + ks[(i + 2) % 3] + np.uint32(i + 1)
+    return x[0], x[1]
+
+
+def open_unit(bits: Array, dtype) -> Array:
+    """A uniform in the open interval (0, 1) from 32 random bits: ``(m + ½)·2^-k`` with the
+    top k bits m (k = 23 in float32, 32 in float64): never 0 or 1, so logs stay finite."""
+    if dtype == jnp.float64:
+        return (bits.astype(jnp.float64) + 0.5) * (2.0**-32)
+    m = (bits >> np.uint32(9)).astype(jnp.float32)
+    return (m + 0.5) * jnp.float32(2.0**-23)
+
+
+def beta_try(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
+             lane: Array) -> tuple[Array, Array]:
+    """One try of the exact Beta(a, b) sampler on each lane (elementwise, broadcasting).
+
+    Args:
+      k1, k2: uint32 key words.
+      a, b: float shape parameters, a, b ≥ 1 (NaN is returned for a or b < 1).
+      try_index: uint32 try number of each lane (0 for the first try).
+      lane: uint32 lane number (the arm).
+
+    Returns:
+      ``(theta, accepted)``: the candidate draw and whether this try accepts it (always for
+      min(a, b) = 1, the closed form).
+    """
+    dtype = a.dtype
+    w1, w2 = threefry2x32(k1, k2, try_index, lane)
+    u1, u2 = open_unit(w1, dtype), open_unit(w2, dtype)
+    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
+    # ---- min(a, b) = 1: inversion with u1
+    log_u = jnp.log(u1)
+    theta_one = jnp.where(a == 1.0, -jnp.expm1(log_u / b), jnp.exp(log_u / a))
+    # ---- min(a, b) > 1: Cheng's BB (lanes with lo = 1 compute it on harmless values)
+    bb = lo > 1.0
+    lo_s = jnp.where(bb, lo, 2.0)
+    hi_s = jnp.where(bb, hi, 2.0)
+    alpha = lo_s + hi_s
+    beta = jnp.sqrt((alpha - 2.0) / (2.0 * lo_s * hi_s - alpha))
+    gamma = lo_s + 1.0 / beta
+    v = beta * jnp.log(u1 / (1.0 - u1))
+    w = lo_s * jnp.exp(v)
+    z = u1 * u1 * u2
+    r = gamma * v - _LOG4
+    s = lo_s + r - w
+    t = jnp.log(z)
+    accept = ((s + _ONE_PLUS_LOG5 >= 5.0 * z) | (s > t)
+              | (r + alpha * jnp.log(alpha / (hi_s + w)) >= t))
+    theta_bb = jnp.where(a == lo_s, w, hi_s) / (hi_s + w)
+    theta = jnp.where(bb, theta_bb, theta_one)
+    theta = jnp.where(lo < 1.0, jnp.nan, theta)
+    return theta.astype(dtype), accept | ~bb
+
+
+def sample_beta(key: Key, a: Array, b: Array) -> Array:
+    """Exact Beta(a, b) draws for a, b ≥ 1 (see the module docstring), unbatched.
+
+    Args:
+      key: PRNG key (threefry), consumed.
+      a, b: [K] float shape parameters ≥ 1.
+
+    Returns:
+      [K] independent Beta(a_j, b_j) draws (NaN where a or b < 1).
+    """
+    kd = jax.random.key_data(key)
+    k1, k2 = kd[0], kd[1]
+    lane = jnp.arange(a.size, dtype=jnp.uint32).reshape(a.shape)
+    theta, ok = beta_try(k1, k2, a, b, jnp.zeros_like(lane), lane)
+
+    def body(carry):
+        theta, ok, i = carry
+        cand, acc = beta_try(k1, k2, a, b, jnp.broadcast_to(i, lane.shape), lane)
+        return jnp.where(ok, theta, cand), ok | acc, i + np.uint32(1)
+
+    theta, _, _ = jax.lax.while_loop(lambda c: ~jnp.all(c[1]), body,
+                                     (theta, ok, jnp.uint32(1)))
+    return theta

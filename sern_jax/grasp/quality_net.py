@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -55,6 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from sern_jax import timing
 from sern_jax.types import Network
 
 __all__ = [
@@ -664,19 +664,6 @@ def _synthetic_sets(num_sets: int, num_candidates: int, size: int = 96):
     return images, (center, angle.astype(np.float32), gdepth.astype(np.float32))
 
 
-def _time(fn, *args, min_time: float = 0.5, min_calls: int = 3) -> float:
-    """Seconds per call of a compiled fn (after one warm-up call), median of 3 rounds."""
-    jax.block_until_ready(fn(*args))
-    rounds = []
-    for _ in range(3):
-        calls, t0 = 0, time.perf_counter()
-        while calls < min_calls or time.perf_counter() - t0 < min_time / 3:
-            jax.block_until_ready(fn(*args))
-            calls += 1
-        rounds.append((time.perf_counter() - t0) / calls)
-    return float(np.median(rounds))
-
-
 def benchmark(
     config: QualityNetConfig = QualityNetConfig(),
     num_sets: int = 16,
@@ -715,7 +702,8 @@ def benchmark(
         return net.apply(params, c.image, c.depth)
 
     args = (params, jnp.asarray(images), jax.tree.map(jnp.asarray, cands))
-    t_score = _time(score, *args, min_time=min_time)
+    t_score = timing.time_calls(lambda: score(*args), repeats=3, min_calls=3,
+                                min_time=min_time / 3).median_s
 
     optimizer = optax.adam(1e-3)
     step = jax.jit(make_train_step(net, optimizer))
@@ -728,9 +716,8 @@ def benchmark(
         jnp.ones((batch_size,), jnp.float32),
     )
     opt_state = init_opt_state(optimizer, params)
-    t_step = _time(
-        lambda p, o, b: step(p, o, b)[2], params, opt_state, batch, min_time=min_time
-    )
+    t_step = timing.time_calls(lambda: step(params, opt_state, batch)[2], repeats=3,
+                               min_calls=3, min_time=min_time / 3).median_s
     return {
         "sets_scored_per_s": num_sets / t_score,
         "grasps_scored_per_s": num_sets * num_candidates / t_score,

@@ -32,6 +32,13 @@ def test_json_stdout_is_one_object():
     assert out["depth"]["batch"] == 1 and out["depth"]["images_per_s"] > 0
     assert out["candidates"]["num_candidates"] == 64
     assert "mjx" not in out["backends"]
+    qn = out["quality_net"]
+    assert qn["train_steps_per_s"] > 0 and qn["sets_scored_per_s"] > 0
+    for field in ("cpu", "cpu_count", "platform", "processor", "python", "jax_backend",
+                  "jax_devices", "load_average_1m"):  # io.machine(devices=True)
+        assert field in out["machine"], field
+    assert native["first_call_s"] > 0 and native["seconds"] > 0
+    assert native["trials_per_cpu_s"] > 0
 
 
 @pytest.mark.parametrize(

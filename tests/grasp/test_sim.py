@@ -110,7 +110,7 @@ def test_mjx_flags_nan(box_model, mjx_sim, paired_trials):
 @pytest.mark.slow
 def test_backends_agree_over_objects():
     """Paired native/MJX outcomes agree on >= 90% of trials (one MJX compile/object)."""
-    from sern_jax.commands import bench_grasp as bench
+    from sern_jax.grasp import benchmarks as bench
 
     result = bench.measure_agreement(["small_box", "sphere", "capsule", "l_shape"], 32)
     assert result["agreement"] >= 0.9, result

@@ -42,6 +42,7 @@ __all__ = [
     "softmax_probs",
     "greedy_probs",
     "epsilon_greedy_probs",
+    "normalized_probs",
     "ucb1_probs",
     "thompson_probs",
     "boltzmann_gumbel_probs",
@@ -150,6 +151,31 @@ def epsilon_greedy_probs(r_hat: Array, epsilon: Array, mask: Array | None = None
     num_valid = jnp.sum(valid)
     explore = valid / jnp.where(num_valid > 0, num_valid, 1.0)
     return (1.0 - epsilon) * greedy_probs(r_hat, mask) + epsilon * explore
+
+
+def normalized_probs(r_hat: Array, mask: Array | None = None) -> Array:
+    """"Normalized probability" exploration: ``π(a) = r̂_a / Σ_b r̂_b`` over the (valid) arms.
+
+    The exploration the SERN paper cites as [13] (Berscheid, Rühr, Kröger 2019): each grasp
+    is tried with probability proportional to its estimated success probability. The
+    estimates must be success probabilities (r̂ ≥ 0); a negative or NaN estimate counts as 0.
+
+    Args:
+      r_hat: [K] reward estimates, ≥ 0.
+      mask: [K] bool validity (None: all valid). Invalid arms get 0 whatever their estimate.
+
+    Returns:
+      [K] probabilities. If some valid estimate is +inf, uniform over those (the limit); if
+      every valid estimate is 0, uniform over the valid arms; all zeros when none is valid.
+    """
+    valid = jnp.ones(r_hat.shape, bool) if mask is None else mask
+    inf = valid & (r_hat == jnp.inf)
+    w = jnp.where(valid & jnp.isfinite(r_hat) & (r_hat > 0), r_hat, 0.0)
+    w = jnp.where(jnp.any(inf), inf.astype(r_hat.dtype), w)
+    total = jnp.sum(w)
+    w = jnp.where(total > 0, w, valid.astype(r_hat.dtype))
+    total = jnp.sum(w)  # 0 only when no arm is valid
+    return w / jnp.where(total > 0, total, 1.0)
 
 
 def ucb1_probs(r_hat: Array, counts: Array, t: Array, c: Array,

@@ -12,7 +12,7 @@ import dataclasses
 from typing import Any, Callable, Mapping, NamedTuple
 
 from sern_jax.learners import (base, decaying, egreedy, ensemble, greedy, neural_linear,
-                               neural_ucb, sern)
+                               neural_ucb, normalized, sern)
 
 __all__ = ["LearnerSpec", "LEARNERS", "names", "check_names", "hyperparameters",
            "make_config", "make"]
@@ -44,6 +44,8 @@ LEARNERS: dict[str, LearnerSpec] = {
         "--bootstrap-p)"),
     "neural_ucb": LearnerSpec(neural_ucb.neural_ucb, neural_ucb.NeuralUCBConfig,
                               "NeuralUCB, diagonal Z, Zhou et al. 2020 (--ucb-lambda, --nu)"),
+    "normalized": LearnerSpec(normalized.normalized, normalized.NormalizedConfig,
+                              "π ∝ r̂ over the valid candidates (the paper's [13])"),
     "egreedy_decay": LearnerSpec(decaying.egreedy_decay, decaying.EGreedyDecayConfig,
                                  "ε-greedy, ε_t = min(1, ε0/t) (--decay-epsilon0)"),
     "sern_decay": LearnerSpec(decaying.sern_decay, decaying.SernDecayConfig,

@@ -26,7 +26,16 @@ the shared :class:`BanditSetup`; a new way is one more such function and one mor
   the engine's general runner;
 * ``numpy``: :func:`numpy_reference`, vectorised over seeds with a Python loop over t (float32,
   inverse CDF with one uniform per round, the same outputs); it may run fewer seeds
-  (``numpy_seeds``).
+  (``numpy_seeds``);
+* ``run_seeds_summary``: ``executor.run_seeds(..., summary=True)``, the public path that
+  reduces over seeds on the device (means, variances, histograms) and copies kilobytes;
+* ``naive_jax``: :func:`naive_jax_bandit`, the ~40-line ``jit(vmap(scan))`` bandit a JAX
+  user writes first (softmax recomputed every round, ``jax.random`` keys per round, plain
+  float32 sums, final regret and counts only), the peer the engine must beat.
+
+``policy="thompson"`` runs Beta-Bernoulli Thompson sampling instead (Beta(1 + S, 1 + F)
+posteriors, argmax): the fast path is :mod:`sern_jax.fast_thompson`, the NumPy reference draws
+its Beta variates with ``Generator.beta`` and the naive JAX peer with ``jax.random.beta``.
 
 Compile time (``.lower().compile()``) is measured separately and excluded from throughput;
 each figure is the median of ``repeats`` timed runs ending in ``block_until_ready``
@@ -44,8 +53,9 @@ import numpy as np
 
 from sern_jax import io, timing
 
-__all__ = ["BanditWorkload", "BanditSetup", "bandit_config", "bandit_setup",
-           "bandit_memory_bytes", "bandit_benchmark", "numpy_reference", "mean_se"]
+__all__ = ["BanditWorkload", "BanditSetup", "BENCH_POLICIES", "bandit_config", "bandit_setup",
+           "bandit_memory_bytes", "bandit_benchmark", "numpy_reference", "naive_jax_bandit",
+           "mean_se"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,6 +72,12 @@ class BanditWorkload:
     devices: int = 0  # shard the seed axis over this many devices (0: one device)
     chunk: int = -1  # seeds per lax.map step of the fast path (-1: 256 on CPU, all on GPU)
     seed: int = 0  # root seed
+    policy: str = "softmax"  # or "thompson"
+    naive_repeats: int = 1  # timed runs of the naive jit(vmap(scan)) peer (0 skips it)
+    summary_repeats: int = -1  # timed runs of run_seeds(summary=True) (-1: repeats; 0 skips)
+
+
+BENCH_POLICIES = ("softmax", "thompson")
 
 
 def bandit_config(w: BanditWorkload):
@@ -69,7 +85,9 @@ def bandit_config(w: BanditWorkload):
     from sern_jax import problems
     from sern_jax import simulate as sim
 
-    config = sim.RunConfig(policy="softmax", estimator="addhalf", schedule="constant",
+    if w.policy not in BENCH_POLICIES:
+        raise ValueError(f"policy must be one of {BENCH_POLICIES}, got {w.policy!r}")
+    config = sim.RunConfig(policy=w.policy, estimator="addhalf", schedule="constant",
                            num_arms=w.arms, horizon=w.horizon, random_means=True)
     # random_means=True: each seed draws its own U[0,1] means; the problem only fixes K.
     params = sim.default_params(config, problems.bernoulli(np.full(w.arms, 0.5)),
@@ -104,12 +122,16 @@ def bandit_setup(w: BanditWorkload) -> BanditSetup:
     """Builds the shared setup; raises ValueError where the fast path cannot run α."""
     import jax
 
-    from sern_jax import fast_softmax, sharding
+    from sern_jax import fast_softmax, fast_thompson, sharding
     from sern_jax import simulate as sim
 
     config, params = bandit_config(w)
     sim.validate(config, params, w.seeds)
-    if not fast_softmax.supports(config, params):
+    if w.policy == "thompson":
+        if not fast_thompson.supports(config):
+            raise ValueError("the fast Thompson runner needs the threefry PRNG in "
+                             "partitionable mode")
+    elif not fast_softmax.supports(config, params):
         raise ValueError(f"alpha={w.alpha} is below the fast path's minimum "
                          f"{fast_softmax.min_alpha(config.dtype)} for float32")
     mesh = sharding.seed_mesh(w.devices) if w.devices else None
@@ -128,8 +150,13 @@ def bandit_setup(w: BanditWorkload) -> BanditSetup:
 
 
 def numpy_reference(num_seeds: int, num_arms: int, horizon: int, alpha: float,
-                    checkpoints: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
+                    checkpoints: np.ndarray, seed: int = 0,
+                    policy: str = "softmax") -> dict[str, np.ndarray]:
     """The same workload in NumPy: vectorised over seeds, a Python loop over rounds.
+
+    With ``policy="thompson"``: θ ~ Beta(1 + S, 1 + F) per arm by ``Generator.beta``, the
+    argmax is played (π is its one-hot, so the Rao–Blackwellised regret equals the realised
+    one and the compensator the counts), ``alpha`` is ignored.
 
     Args:
       num_seeds: S.
@@ -162,12 +189,18 @@ def numpy_reference(num_seeds: int, num_arms: int, horizon: int, alpha: float,
            "compensator": np.zeros((num_seeds, len(grid), num_arms), f32),
            "min_prob": np.zeros((num_seeds, len(grid)), f32)}
     for t in range(1, horizon + 1):
-        r_hat = (sums + f32(0.5)) / (counts + f32(1.0))
-        w = np.exp((r_hat - r_hat.max(axis=1, keepdims=True)) * inv_alpha)
-        probs = w / w.sum(axis=1, keepdims=True)
-        cdf = np.cumsum(probs, axis=1)
-        u = rng.random(num_seeds, dtype=f32)
-        arm = np.minimum((cdf <= (u * cdf[:, -1])[:, None]).sum(axis=1), num_arms - 1)
+        if policy == "thompson":
+            theta = rng.beta(1.0 + sums, 1.0 + counts - sums)
+            arm = theta.argmax(axis=1)
+            probs = np.zeros((num_seeds, num_arms), f32)
+            probs[rows, arm] = 1.0
+        else:
+            r_hat = (sums + f32(0.5)) / (counts + f32(1.0))
+            w = np.exp((r_hat - r_hat.max(axis=1, keepdims=True)) * inv_alpha)
+            probs = w / w.sum(axis=1, keepdims=True)
+            cdf = np.cumsum(probs, axis=1)
+            u = rng.random(num_seeds, dtype=f32)
+            arm = np.minimum((cdf <= (u * cdf[:, -1])[:, None]).sum(axis=1), num_arms - 1)
         r_arm = means[rows, arm]
         reward = rng.random(num_seeds, dtype=f32) < r_arm
         regret += best - r_arm
@@ -184,6 +217,48 @@ def numpy_reference(num_seeds: int, num_arms: int, horizon: int, alpha: float,
             out["compensator"][:, g] = comp
             out["min_prob"][:, g] = min_prob
     return out
+
+
+def naive_jax_bandit(num_arms: int, horizon: int, alpha: float, policy: str = "softmax"):
+    """The bandit a JAX user writes first: ``run(key) -> (regret, regret_rb, counts [K])``.
+
+    One seed, a ``lax.scan`` over all T rounds; vmap and jit it over seeds. Each round splits
+    a ``fold_in`` key, recomputes the add-half estimates and ``softmax(r̂/α)`` over all K
+    arms and samples by inverse CDF with one uniform (Thompson: ``jax.random.beta`` per arm
+    and the argmax); float32 sums without compensation; only the final regret and counts are
+    returned. Means are U[0, 1] per seed, as in the workload (its own streams, not the
+    engine's: compare means with standard errors).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    def run(key):
+        key_means, key_run = jax.random.split(key)
+        means = jax.random.uniform(key_means, (num_arms,))
+        best = jnp.max(means)
+
+        def step(carry, t):
+            counts, sums, regret, regret_rb = carry
+            key_arm, key_reward = jax.random.split(jax.random.fold_in(key_run, t))
+            if policy == "thompson":
+                theta = jax.random.beta(key_arm, 1.0 + sums, 1.0 + counts - sums)
+                arm = jnp.argmax(theta)
+                probs = jax.nn.one_hot(arm, num_arms)
+            else:
+                probs = jax.nn.softmax((sums + 0.5) / (counts + 1.0) / alpha)
+                u = jax.random.uniform(key_arm)
+                arm = jnp.minimum(jnp.sum(jnp.cumsum(probs) <= u), num_arms - 1)
+            reward = jax.random.uniform(key_reward) < means[arm]
+            hot = jax.nn.one_hot(arm, num_arms)
+            return (counts + hot, sums + hot * reward, regret + best - means[arm],
+                    regret_rb + best - probs @ means), None
+
+        zeros = jnp.zeros((num_arms,))
+        init = (zeros, zeros, jnp.float32(0.0), jnp.float32(0.0))
+        (counts, _, regret, regret_rb), _ = jax.lax.scan(step, init, jnp.arange(horizon))
+        return regret, regret_rb, counts
+
+    return run
 
 
 def mean_se(x: np.ndarray) -> tuple[float, float]:
@@ -205,19 +280,20 @@ def _compile_s(fn, *args) -> tuple[Any, float]:
 def _path_fast(s: BanditSetup):
     import jax
 
-    from sern_jax import fast_softmax
+    from sern_jax import fast_softmax, fast_thompson
     from sern_jax import simulate as sim
 
     w = s.workload
     chunk_target = w.chunk if w.chunk >= 0 else (
         fast_softmax.DEFAULT_CPU_CHUNK if s.backend == "cpu" else 0)
     chunk, padded = fast_softmax.chunk_layout(w.seeds, chunk_target, s.num_devices)
-    fn = jax.jit(fast_softmax.make_batched(s.config, chunk=chunk, mesh=s.mesh))
+    module = fast_thompson if w.policy == "thompson" else fast_softmax
+    fn = jax.jit(module.make_batched(s.config, chunk=chunk, mesh=s.mesh))
     keys = s.put(sim.seed_keys(s.root, padded))
     compiled, compile_s = _compile_s(fn, keys, s.params)
     t = timing.time_calls(lambda: compiled(keys, s.params), w.repeats, warmup=0)
     out = jax.tree.map(lambda x: np.asarray(x)[:w.seeds], t.result)
-    entry = {"engine_path": "sern_jax.fast_softmax.make_batched", "chunk": chunk,
+    entry = {"engine_path": f"{module.__name__}.make_batched", "chunk": chunk,
              "padded_seeds": padded, "compile_s": compile_s,
              "seed_rounds_per_s": s.work / t.median_s, **t.stats(), "concurrent_calls": 1}
     return entry, out
@@ -239,6 +315,42 @@ def _path_run_seeds(s: BanditSetup):
              "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
              "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
     return entry, t.result
+
+
+def _path_run_seeds_summary(s: BanditSetup):
+    import jax
+    import jax.numpy as jnp
+
+    from sern_jax import executor
+
+    w = s.workload
+    plan = executor.plan_run(s.config, s.params, w.seeds, mesh=s.mesh, summary=True)
+    _, compile_s = _compile_s(plan.fn, jax.ShapeDtypeStruct((plan.chunk,), s.root.dtype),
+                              s.params, jax.ShapeDtypeStruct((), jnp.int32))
+    repeats = w.repeats if w.summary_repeats < 0 else w.summary_repeats
+    t = timing.time_calls(
+        lambda: executor.run_seeds(s.config, s.params, w.seed, w.seeds, mesh=s.mesh,
+                                   summary=True), repeats, warmup=0)
+    arrays = executor.summary_arrays(t.result)
+    entry = {"engine_path": "sern_jax.executor.run_seeds(summary=True)", "fast": plan.fast,
+             "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
+             "summary_bytes": int(sum(a.nbytes for a in arrays.values())),
+             "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
+    return entry, t.result
+
+
+def _path_naive(s: BanditSetup):
+    import jax
+
+    w = s.workload
+    fn = jax.jit(jax.vmap(naive_jax_bandit(w.arms, w.horizon, w.alpha, w.policy)))
+    keys = jax.random.split(jax.random.key(w.seed + 1), w.seeds)
+    compiled, compile_s = _compile_s(fn, keys)
+    t = timing.time_calls(lambda: compiled(keys), w.naive_repeats, warmup=0)
+    regret, regret_rb, counts = (np.asarray(x) for x in t.result)
+    entry = {"engine_path": "benchmarks.naive_jax_bandit (jit(vmap(scan)))",
+             "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
+    return entry, {"regret": regret, "regret_rb": regret_rb, "counts": counts}
 
 
 def _path_general(s: BanditSetup):
@@ -265,7 +377,8 @@ def _path_numpy(s: BanditSetup):
     w = s.workload
     grid = sim.checkpoint_times(s.config)
     t = timing.time_calls(lambda: numpy_reference(w.numpy_seeds, w.arms, w.horizon, w.alpha,
-                                                  grid, seed=w.seed), w.repeats, warmup=0)
+                                                  grid, seed=w.seed, policy=w.policy),
+                          w.repeats, warmup=0)
     entry = {"seeds": w.numpy_seeds, "seed_rounds_per_s": w.numpy_seeds * w.horizon
              / t.median_s, "dtype": "float32", **t.stats()}
     return entry, t.result
@@ -285,13 +398,18 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
 
     s = bandit_setup(w)
     result: dict[str, Any] = {"benchmark": "sern bench bandit", "workload": {
-        "policy": "softmax", "estimator": "addhalf", "num_arms": w.arms,
+        "policy": w.policy, "estimator": "addhalf", "num_arms": w.arms,
         "horizon": w.horizon, "seeds": w.seeds, "alpha": w.alpha,
         "random_means": "U[0,1] per seed", "dtype": "float32",
         "checkpoints": int(sim.checkpoint_times(s.config).size)}}
 
     result["fast"], fast_out = _path_fast(s)
     result["run_seeds"], rs_out = _path_run_seeds(s)
+    summary_out = naive_out = None
+    if w.summary_repeats != 0:
+        result["run_seeds_summary"], summary_out = _path_run_seeds_summary(s)
+    if w.naive_repeats:
+        result["naive_jax"], naive_out = _path_naive(s)
     general_out = numpy_out = None
     if w.general_repeats:
         result["general"], general_out = _path_general(s)
@@ -306,6 +424,18 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
     agree["fast_mean_regret_rb_T"] = mean_se(fast_out.regret_rb[:, -1])[0]
     agree["run_seeds_counts_equal_fast"] = bool(np.array_equal(rs_out.counts, fast_out.counts))
     agree["run_seeds_mean_regret_T"] = mean_se(rs_out.regret[:, -1])[0]
+    if summary_out is not None:
+        sm = float(summary_out.regret.mean[-1])
+        agree["run_seeds_summary_mean_regret_T"] = sm
+        # the same seeds reduced on the device: equal to the fast path's mean up to rounding
+        agree["summary_mean_rel_diff_vs_fast"] = abs(sm - fm) / max(abs(fm), 1e-12)
+        agree["summary_counts_min_equal_fast"] = bool(np.array_equal(
+            summary_out.counts.min, fast_out.counts.min(0)))
+    if naive_out is not None:
+        nvm, nvse = mean_se(naive_out["regret"])
+        agree["naive_jax_mean_regret_T"] = nvm
+        agree["naive_jax_se"] = nvse
+        agree["z_fast_vs_naive_jax"] = (fm - nvm) / max(np.hypot(fse, nvse), 1e-12)
     if general_out is not None:
         gm, gse = mean_se(general_out.regret[:, -1])
         agree["general_mean_regret_T"] = gm
@@ -321,8 +451,8 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
     result["regret_agreement"] = agree
 
     # ---- headline
-    rates = {k: result[k]["seed_rounds_per_s"] for k in ("fast", "run_seeds", "general")
-             if k in result}
+    rates = {k: result[k]["seed_rounds_per_s"] for k in ("fast", "run_seeds", "general",
+                                                         "run_seeds_summary") if k in result}
     best_path = max(rates, key=rates.get)
     best_rate = rates[best_path]
     numpy_rate = result["numpy"]["seed_rounds_per_s"] if "numpy" in result else None
@@ -342,6 +472,18 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         "speedup_vs_numpy": best_rate / numpy_rate if numpy_rate else None,
         "general_speedup_vs_numpy": (general_rate / numpy_rate
                                      if numpy_rate and general_rate else None),
+        # issue 20: the public path with on-device summaries against the engine and the
+        # naive jit(vmap(scan)) peer measured in this process
+        "run_seeds_summary_seed_rounds_per_s": rates.get("run_seeds_summary"),
+        "naive_jax_seed_rounds_per_s": (result["naive_jax"]["seed_rounds_per_s"]
+                                        if "naive_jax" in result else None),
+        "public_over_fast": (rates["run_seeds_summary"] / rates["fast"]
+                             if "run_seeds_summary" in rates else None),
+        "public_over_naive_jax": (rates["run_seeds_summary"]
+                                  / result["naive_jax"]["seed_rounds_per_s"]
+                                  if "run_seeds_summary" in rates and "naive_jax" in result
+                                  else None),
+        "fast_speedup_vs_numpy": rates["fast"] / numpy_rate if numpy_rate else None,
         "repeats": w.repeats,
         "general_repeats": w.general_repeats,
         "peak_rss_mb": io.peak_rss_mb(),

@@ -32,12 +32,38 @@ def test_bench_bandit_json(capsys):
     assert result[result["best_path"]]["seed_rounds_per_s"] == result["seed_rounds_per_s"]
     # different streams (NumPy vs JAX), same workload: means agree within a few SE
     assert abs(agree["z_fast_vs_numpy"]) < 6
+    # issue 20: the public path with on-device summaries and the naive jit(vmap(scan)) peer
+    for field in ("naive_jax_seed_rounds_per_s", "run_seeds_summary_seed_rounds_per_s",
+                  "public_over_fast", "public_over_naive_jax"):
+        assert isinstance(result[field], (int, float)) and result[field] > 0, field
+    assert agree["summary_mean_rel_diff_vs_fast"] < 1e-5  # the same seeds, reduced on device
+    assert agree["summary_counts_min_equal_fast"]
+    assert abs(agree["z_fast_vs_naive_jax"]) < 6
+    # K = 64, G = 32: ~1.9 MB of float64/int64 statistics and histograms, whatever the seeds
+    assert result["run_seeds_summary"]["summary_bytes"] < 2_500_000
+
+
+def test_bench_bandit_thompson_json(capsys):
+    code = cli.main(["bench", "bandit", "--json", "--policy", "thompson", "--seeds", "48",
+                     "--horizon", "150", "--numpy-seeds", "48", "--repeats", "1",
+                     "--naive-repeats", "0"])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["workload"]["policy"] == "thompson"
+    assert result["fast"]["engine_path"] == "sern_jax.fast_thompson.make_batched"
+    agree = result["regret_agreement"]
+    assert result["run_seeds"]["fast"] and agree["run_seeds_counts_equal_fast"]
+    assert agree["fast_general_counts_identical_fraction"] == 1.0
+    assert abs(agree["z_fast_vs_numpy"]) < 6  # NumPy's Generator.beta, the same workload
+    assert result["naive_jax_seed_rounds_per_s"] is None  # skipped with --naive-repeats 0
 
 
 @pytest.mark.parametrize("argv,match", [(["--arms", "1"], "arms"),
                                          (["--alpha", "0"], "alpha"),
                                          (["--alpha", "0.001"], "alpha"),
-                                         (["--numpy-seeds", "1"], "numpy-seeds")])
+                                         (["--numpy-seeds", "1"], "numpy-seeds"),
+                                         (["--policy", "ucb1"], "policy"),
+                                         (["--naive-repeats", "-1"], "naive-repeats")])
 def test_bench_bandit_bad_input(argv, match, capsys):
     assert cli.main(["bench", "bandit", "--json", *argv]) == 2
     assert match in capsys.readouterr().err

@@ -40,6 +40,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="seeds per lax.map step of the fast path (-1: 256 on CPU, all on "
                         "GPU; 0: all)")
     p.add_argument("--seed", type=int, default=0, help="root seed")
+    p.add_argument("--policy", default="softmax",
+                   help="SERN softmax (default) or Beta-Bernoulli Thompson sampling")
+    p.add_argument("--naive-repeats", type=int, default=1,
+                   help="timed runs of the naive jit(vmap(scan)) JAX peer (default 1; 0 skips)")
+    p.add_argument("--summary-repeats", type=int, default=-1,
+                   help="timed runs of run_seeds(summary=True) (-1: --repeats; 0 skips)")
     p.set_defaults(func=run)
     return p
 
@@ -49,9 +55,13 @@ def _validate(args) -> None:
                              ("--seeds", args.seeds, 1), ("--repeats", args.repeats, 1),
                              ("--numpy-seeds", args.numpy_seeds, 0),
                              ("--general-repeats", args.general_repeats, 0),
+                             ("--naive-repeats", args.naive_repeats, 0),
+                             ("--summary-repeats", args.summary_repeats, -1),
                              ("--devices", args.devices, 0), ("--chunk", args.chunk, -1)):
         if value < low:
             raise ValueError(f"{name} must be >= {low}, got {value}")
+    if args.policy not in ("softmax", "thompson"):
+        raise ValueError(f"--policy must be softmax or thompson, got {args.policy!r}")
     if not (args.alpha > 0 and np.isfinite(args.alpha)):
         raise ValueError(f"--alpha must be finite and > 0, got {args.alpha}")
     if args.numpy_seeds == 1:
@@ -60,6 +70,8 @@ def _validate(args) -> None:
                               ("--numpy-seeds", args.numpy_seeds, 2**31 - 1),
                               ("--repeats", args.repeats, 1000),
                               ("--general-repeats", args.general_repeats, 1000),
+                              ("--naive-repeats", args.naive_repeats, 1000),
+                              ("--summary-repeats", args.summary_repeats, 1000),
                               ("--horizon", args.horizon, 2**24 - 1),
                               ("--seed", args.seed, 2**32 - 1)):
         if value > high:
@@ -75,7 +87,8 @@ def _workload(args):
         arms=args.arms, horizon=args.horizon, seeds=args.seeds, alpha=args.alpha,
         repeats=args.repeats, numpy_seeds=args.numpy_seeds,
         general_repeats=args.general_repeats, devices=args.devices, chunk=args.chunk,
-        seed=args.seed)
+        seed=args.seed, policy=args.policy, naive_repeats=args.naive_repeats,
+        summary_repeats=args.summary_repeats)
 
 
 def _check_memory(workload) -> None:
@@ -109,19 +122,21 @@ def run(args) -> int:
 def _table(result: dict, w) -> str:
     dev = result["device"]
     agree = result["regret_agreement"]
-    lines = [f"sern bench bandit: K={w.arms} T={w.horizon} S={w.seeds} α={w.alpha} "
+    lines = [f"sern bench bandit ({w.policy}): K={w.arms} T={w.horizon} S={w.seeds} α={w.alpha} "
              f"on {dev['backend']} ({dev['kind']} ×{dev['num_devices']})",
-             f"{'path':10s} {'seeds':>7s} {'seed-rounds/s':>15s} {'compile s':>10s} "
+             f"{'path':17s} {'seeds':>7s} {'seed-rounds/s':>15s} {'compile s':>10s} "
              f"{'median s':>9s} {'mean R_T':>10s}"]
     rows = [("run_seeds", w.seeds, "run_seeds_mean_regret_T"),
+            ("run_seeds_summary", w.seeds, "run_seeds_summary_mean_regret_T"),
             ("fast", w.seeds, "fast_mean_regret_T"),
+            ("naive_jax", w.seeds, "naive_jax_mean_regret_T"),
             ("general", w.seeds, "general_mean_regret_T"),
             ("numpy", w.numpy_seeds, "numpy_mean_regret_T")]
     for name, seeds, regret in rows:
         if name not in result:
             continue
         r = result[name]
-        lines.append(f"{name:10s} {seeds:7d} {r['seed_rounds_per_s']:15,.0f} "
+        lines.append(f"{name:17s} {seeds:7d} {r['seed_rounds_per_s']:15,.0f} "
                      f"{r.get('compile_s', float('nan')):10.2f} {r['median_s']:9.3f} "
                      f"{agree[regret]:10.2f}")
     if result["numpy_seed_rounds_per_s"]:

@@ -174,12 +174,13 @@ class TrainConfig:
     loss: str = "bce"
 
     def __post_init__(self):
+        # named as `sern grasp learn` spells them (batch_size, learning_rate: no flag)
         for name, flag in (("horizon", "--rounds x --explore"), ("fit_steps", "--fit-steps"),
-                           ("batch_size", "--batch-size")):
+                           ("batch_size", "batch_size")):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{flag} must be an integer >= 1, got {v!r}")
-        check_positive("--learning-rate", self.learning_rate)
+        check_positive("learning_rate", self.learning_rate)
         if self.loss not in LOSSES:
             raise ValueError(f"--loss must be one of {tuple(LOSSES)}, got {self.loss!r}")
 

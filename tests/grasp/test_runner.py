@@ -1,7 +1,10 @@
-"""Tests for sern_jax.grasp.online (Algorithm 1 for grasping): a tiny end-to-end run,
-resume after an interrupt, common random numbers, SERN's choice law, learning from
-failures, and bad input refused before anything compiles."""
+"""Tests for sern_jax.grasp.runner (Algorithm 1 for grasping, batched): a tiny end-to-end
+run equal bit for bit to the pre-refactor online.run, resume after an interrupt, common
+random numbers, SERN's choice law, learning from failures, a toy learner through the
+runner, a learner returning no grasp stopped, and bad input refused before anything
+compiles."""
 
+import dataclasses
 import shutil
 import subprocess
 import sys
@@ -14,15 +17,17 @@ import pytest
 import scipy.stats
 
 from sern_jax import io
+from sern_jax import policies as pol
 from sern_jax.commands import main as cli
-from sern_jax.grasp import artifacts, context, objects, online
+from sern_jax.grasp import artifacts, context, objects, runner
+from sern_jax.learners import base as lbase
 
-# 1 object x 3 policies x 2 seeds x 2 rounds of 3 exploration + 2 evaluation grasps.
+# 1 object x 4 learners x 2 seeds x 2 rounds of 3 exploration + 2 evaluation grasps.
 # ε = 0 makes egreedy the greedy policy: with common random numbers its row must equal
 # greedy's exactly. A large learning rate makes 4 fit steps visible.
-CONFIG = online.OnlineConfig(
-    policies=("sern", "egreedy", "greedy"), num_seeds=2, rounds=2, explore=3, evaluate=2,
-    epsilon=0.0, eval_poses=1, eval_trials=2, fit_steps=4, batch_size=8,
+CONFIG = runner.OnlineConfig(
+    policies=("sern", "sern_log", "egreedy", "greedy"), num_seeds=2, rounds=2, explore=3,
+    evaluate=2, epsilon=0.0, eval_poses=1, eval_trials=2, fit_steps=4, batch_size=8,
     learning_rate=1e-2)
 OBJECT = "triangular_prism"
 
@@ -41,7 +46,7 @@ def run_a(tiny_theta0, spec, tmp_path_factory):
     """An uninterrupted run; the checkpoint after round 1 is copied aside."""
     out = tmp_path_factory.mktemp("learn_a")
     aside = tmp_path_factory.mktemp("aside") / "checkpoint_round1.npz"
-    real = online._save
+    real = runner._save
 
     def save_and_copy(path, *args):
         real(path, *args)
@@ -49,8 +54,8 @@ def run_a(tiny_theta0, spec, tmp_path_factory):
             shutil.copy(path, aside)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(online, "_save", save_and_copy)
-        res = online.run(CONFIG, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
+        mp.setattr(runner, "_save", save_and_copy)
+        res = runner.run(CONFIG, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
     assert aside.exists()
     return res, out, aside
 
@@ -93,7 +98,7 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
     res, _, aside = run_a
     shutil.copy(aside, tmp_path / "checkpoint.npz")  # stopped after round 1
     lines = []
-    resumed = online.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    resumed = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                          log=lines.append)
     assert any("at round 2" in line for line in lines)
     assert resumed["table"] == res["table"]
@@ -101,7 +106,7 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
         np.testing.assert_array_equal(getattr(resumed["results"], name),
                                       getattr(res["results"], name), err_msg=name)
     # a finished run reruns to the same table without new work
-    again = online.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    again = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                        log=_quiet)
     assert again["table"] == res["table"]
 
@@ -109,13 +114,13 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
 def test_other_run_in_same_dir_is_refused(run_a, tiny_theta0, spec, tmp_path):
     _, out, _ = run_a
     with pytest.raises(ValueError, match="no objects"):
-        online.run(CONFIG, [], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+        runner.run(CONFIG, [], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
     with pytest.raises(ValueError, match="distinct"):
-        online.run(CONFIG, [spec, spec], tmp_path, theta0=tiny_theta0, progress=False,
+        runner.run(CONFIG, [spec, spec], tmp_path, theta0=tiny_theta0, progress=False,
                    log=_quiet)
-    other = online.OnlineConfig(**{**CONFIG.__dict__, "seed": 1})
+    other = runner.OnlineConfig(**{**CONFIG.__dict__, "seed": 1})
     with pytest.raises(ValueError, match="different learning run"):
-        online.run(other, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
+        runner.run(other, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
 
 
 def test_common_random_numbers(run_a):
@@ -133,11 +138,9 @@ def test_common_random_numbers(run_a):
         a = getattr(r, name)[0]
         np.testing.assert_array_equal(a[:, q["sern"]], a[:, q["greedy"]])
     # the same grasps (crops) and outcomes went into the two copies' data sets
-    saved = io.load_npz(out / "checkpoint.npz")
-    for f in ("image", "depth", "label", "weight"):
-        b = saved[f"buffer_{f}"]
-        np.testing.assert_array_equal(b[:, :, q["egreedy"]], b[:, :, q["greedy"]])
-
+    buf_e, buf_g = res["states"][q["egreedy"]].buffer, res["states"][q["greedy"]].buffer
+    for x, y in zip(jax.tree.leaves(buf_e), jax.tree.leaves(buf_g)):
+        np.testing.assert_array_equal(x, y)
 
 class _HashSimulator:
     """A stand-in simulator whose outcome is a fixed function of (grasp, noise, pose), so
@@ -174,7 +177,7 @@ def test_shared_trials_equal_simulating_every_copy(spec):
     poses = rng.normal(size=(1, num_s, num_n, 7))
     keys = [[jax.random.key(100 + s) for s in range(num_s)]]
     simulator, counts = _HashSimulator(), {}
-    got = online._run_trials([simulator], grasps, poses, keys, num_n, counts)
+    got = runner._run_trials([simulator], grasps, poses, keys, num_n, counts)
     assert counts == {"requested": num_s * num_q * num_n, "simulated": num_s * 6}
     assert simulator.rows == num_s * 6
     want = np.zeros_like(got)
@@ -220,7 +223,7 @@ def test_oracle_matches_success_probability(spec):
     poses = np.asarray(ctx.poses)[None, None]
     key = jax.random.key(5)
     counts = {"requested": 0, "simulated": 0}
-    got = online._oracle([simulator], cands, poses, 2, [[key]], counts)
+    got = runner._oracle([simulator], cands, poses, 2, [[key]], counts)
     assert got.shape == (1, 1, 2, 64)
     valid = np.asarray(ctx.candidates.valid)
     want = simulator.success_probability(key, np.asarray(ctx.candidates.grasps)[0], 2,
@@ -230,78 +233,104 @@ def test_oracle_matches_success_probability(spec):
     assert counts["simulated"] == 2 * valid.sum()
 
 
-def test_regret_accounting(tiny_theta0, spec, tmp_path):
-    """With regret_trials, each round's pseudo-regret is finite, in [0, explore], NaN at
-    round 0, and reported in the table; greedy's equals best - oracle[chosen]."""
-    import dataclasses
+def test_regret_accounting(tiny_theta0, spec, tmp_path, monkeypatch):
+    """With regret_trials, the oracle chooses the best candidate on one set of trials and
+    values every candidate on an independent set (issue 17): greedy's pseudo-regret is
+    value[argmax select] - value[chosen], summed over the round; NaN at round 0; the table
+    carries Student-t intervals over the seeds."""
+    from sern_jax import stats
 
-    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1,
+    calls = []
+    real = runner._oracle
+
+    def spy(simulators, cands, poses, num_trials, keys, counts):
+        out = real(simulators, cands, poses, num_trials, keys, counts)
+        calls.append((jax.random.key_data(keys[0][0]), np.asarray(cands.valid, bool), out))
+        return out
+
+    monkeypatch.setattr(runner, "_oracle", spy)
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=2,
                                  rounds=1, explore=2, regret_trials=2)
-    res = online.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    res = runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet)
     pr = res["results"].pseudo_regret
     assert np.isnan(pr[0]).all() and np.isfinite(pr[1:]).all()
-    assert (pr[1:] >= -1e-6).all() and (pr[1:] <= config.explore + 1e-6).all()
+    assert (np.abs(pr[1:]) <= config.explore + 1e-6).all()
+    assert len(calls) == 2  # one selection and one valuation set in the round
+    (key_sel, valid, select), (key_val, _, value) = calls
+    assert not np.array_equal(key_sel, key_val)  # independent trials
+    assert not np.array_equal(select, value)
+    action = res["results"].explore_action[1, 0, 1]  # greedy [S, E]
+    best, _ = stats.independent_best(select[0], value[0], valid[0])  # [S, E]
+    chosen = np.take_along_axis(value[0], action[..., None], -1)[..., 0]
+    np.testing.assert_allclose(pr[1, 0, 1], (best - chosen).sum(-1), atol=1e-12)
     assert "oracle" in res["timings"]
     for row in res["table"]:
         assert len(row["pseudo_regret"]) == config.rounds
+        (lo, hi), = row["pseudo_regret_ci95"]
+        assert lo <= row["pseudo_regret"][0] <= hi
+        assert row["pseudo_regret_total_ci95"][0] <= row["pseudo_regret_total"]
     from sern_jax.commands import grasp_learn as learn_cli
     assert "Pseudo-regret per round" in learn_cli.format_table(res["table"])
     with pytest.raises(ValueError, match="regret_trials"):
         dataclasses.replace(config, regret_trials=-1)
 
-
 def test_learner_told_only_failures_lowers_its_scores(tiny_theta0, spec, tmp_path,
                                                       monkeypatch):
     """Every trial fails: after the run, the learner scores the grasps it tried lower than
-    θ0 did, in every (seed, policy) copy."""
-    monkeypatch.setattr(online, "_run_trials",
+    θ0 did, in every (seed, learner) copy."""
+    monkeypatch.setattr(runner, "_run_trials",
                         lambda simulators, grasps, *a: np.zeros(grasps.shape[:4], bool))
-    res = online.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    res = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet)
     assert (res["results"].paper_eval == 0).all()
-    saved = io.load_npz(tmp_path / "checkpoint.npz")
-    assert (saved["buffer_label"] == 0).all() and (saved["buffer_weight"] == 1).all()
-    template = jax.tree.map(lambda x: x[None, None, None], tiny_theta0.params)
-    leaves = [saved[f"p{i}"] for i in range(len(jax.tree.leaves(template)))]
-    learned = jax.tree.unflatten(jax.tree.structure(template), leaves)
     net = tiny_theta0.network
-    for s in range(CONFIG.num_seeds):
-        for q in range(len(CONFIG.policies)):
-            image = saved["buffer_image"][0, s, q]
-            depth = saved["buffer_depth"][0, s, q]
+    horizon = CONFIG.horizon
+    for q, state in enumerate(res["states"]):
+        buf = state.buffer
+        assert (np.asarray(buf.reward)[..., :horizon] == 0).all()
+        assert (np.asarray(buf.weight)[..., :horizon] == 1).all()
+        assert (np.asarray(buf.count) == horizon).all()
+        for s in range(CONFIG.num_seeds):
+            image = np.asarray(buf.inputs[0])[0, s, :horizon]
+            depth = np.asarray(buf.inputs[1])[0, s, :horizon]
             before = np.asarray(net.apply(tiny_theta0.params, image, depth))
-            after = np.asarray(net.apply(jax.tree.map(lambda x: x[0, s, q], learned),
+            after = np.asarray(net.apply(jax.tree.map(lambda x, s=s: x[0, s], state.params),
                                          image, depth))
             assert (after < before).all(), (s, q, before, after)
             assert after.mean() < before.mean() - 0.05
 
-
 def test_sern_choices_follow_softmax_over_valid(tiny_theta0, spec):
-    """make_choose's SERN draws, over many uniforms on one context, match softmax(r̂/α)
+    """The sern learner's draws, over many uniforms on one context, match softmax(r̂/α)
     restricted to the valid slots; invalid slots are never chosen."""
+    from sern_jax.grasp import crops as crops_lib
+
     ctx = context.make_contexts(jax.random.key(5), spec, 1)
     valid = np.asarray(ctx.candidates.valid).copy()
     valid[0, ::4] = False  # some invalid slots, among them possibly the best
     cands = ctx.candidates._replace(valid=jnp.asarray(valid))
-    choose = online.make_choose(tiny_theta0.network, ("sern",))
-    params = jax.tree.map(lambda x: x[None], tiny_theta0.params)
-    num = 40_000
-    u = jax.random.uniform(jax.random.key(6), (num, 1))
-    one = jax.jit(choose)
-    _, r_hat, _, _ = one(params, ctx.depth, cands, u[0], jnp.ones(1), 0.0)
-    r = np.asarray(r_hat, np.float64)[0, 0]
+    crops = crops_lib.extract_batch(ctx.depth, cands)
+    model = runner.quality_model(runner.copies_network(tiny_theta0.network.config))
+    r = np.asarray(model.apply(tiny_theta0.params, crops.image[0], crops.depth[0]), np.float64)
     v = valid[0]
-    alpha = jnp.asarray([(r[v].max() - r[v].min()) / 3])  # a law that is not flat
-    _, _, probs, _ = one(params, ctx.depth, cands, u[0], alpha, 0.0)
-    # many uniforms, one context: only the action is batched (crops and r̂ are computed once)
-    many = jax.jit(jax.vmap(lambda uu: choose(params, ctx.depth, cands, uu, alpha, 0.0)[0]))
-    action = np.asarray(many(u)).reshape(-1)
-    alpha = float(alpha[0])
+    alpha = float(np.float32((r[v].max() - r[v].min()) / 3))  # a law that is not flat
+    config = runner.OnlineConfig(policies=("sern",), alpha=alpha)
+    learner = runner.make_learner(config, "sern", model)
+    state = learner.init(jax.random.key(0), tiny_theta0.params,
+                         runner.core_data("dpp", tiny_theta0))
+
+    def act(u):
+        obs = lbase.Obs((crops.image[0], crops.depth[0]), jnp.asarray(v), u, jnp.int32(0))
+        return learner.act(jax.random.key(0), state, obs)[:2]
+
+    num = 40_000
+    u = jax.random.uniform(jax.random.key(6), (num,))
+    _, probs = jax.jit(act)(u[0])
+    action = np.asarray(jax.jit(jax.vmap(act))(u)[0])
     z = np.where(v, r / alpha, -np.inf)
     exact = np.exp(z - z.max())
     exact /= exact.sum()
-    np.testing.assert_allclose(np.asarray(probs)[0, 0], exact, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(probs), exact, atol=1e-5)
     assert v[action].all() and (action >= 0).all()  # never an invalid slot
     counts = np.bincount(action, minlength=v.size)[v]
     assert 0.5 * np.abs(counts / num - exact[v]).sum() < 0.02  # total variation
@@ -310,7 +339,6 @@ def test_sern_choices_follow_softmax_over_valid(tiny_theta0, spec):
     assert _chisquare_p(counts, exact[v]) > 1e-4
     wrong = np.exp(z / 2 - z.max() / 2)
     assert _chisquare_p(counts, wrong[v] / wrong[v].sum()) < 1e-4
-
 
 def _chisquare_p(counts, probs):
     """Pearson's chi-square p-value, cells pooled (smallest first) to expected counts >= 5."""
@@ -337,28 +365,36 @@ def _chisquare_p(counts, probs):
     ("alpha", -1.0, "alpha"), ("rounds", 0, "rounds"), ("num_seeds", 0, "num_seeds"),
     ("epsilon", 1.5, "epsilon"), ("eval_poses", -1, "eval_poses"), ("p", 1.0, "p must"),
     ("core_set", "dpp2", "core_set"), ("loss", "mse", "loss"), ("backend", "gpu", "backend"),
+    ("alpha", 1e-40, "^--alpha must"), ("alpha", float("nan"), "^--alpha must"),
+    ("alpha", 1e39, "^--alpha must"), ("epsilon", 1e-45, "^--epsilon must"),
+    ("alpha0", float("inf"), "^--alpha0 must"), ("learning_rate", 1e-39, "learning_rate"),
+    ("hyper", (("nope", 1.0),), "hyper"),
 ])
 def test_bad_config_is_a_clear_error(field, value, match):
     with pytest.raises(ValueError, match=match):
-        online.OnlineConfig(**{field: value})
+        runner.OnlineConfig(**{field: value})
 
 
 @pytest.mark.parametrize("argv, match", [
-    (["--policies", "sern,foo"], "unknown policy 'foo'"),
-    (["--alpha", "0"], "alpha must be > 0"),
-    (["--alpha", "-0.5"], "alpha must be > 0"),
+    (["--policies", "sern,foo"], "--policies: unknown policy 'foo'; choose from sern"),
+    (["--policies", "sern,sern"], "--policies: policies must not repeat"),
+    (["--alpha", "0"], "--alpha must"), (["--alpha", "-0.5"], "--alpha must"),
+    (["--alpha", "1e-40"], "--alpha 1e-40 is below float32's smallest normal"),
+    (["--alpha", "nan"], "--alpha"),
+    (["--epsilon", "1e-39"], "--epsilon 1e-39 is below float32's smallest normal"),
+    (["--alpha0", "inf"], "--alpha0"),
     (["--eval-poses", "-1"], "--eval-poses must be an integer >= 0"),
     (["--regret-trials", "-2"], "--regret-trials must be an integer >= 0"),
     (["--eval-trials", "0"], "--eval-trials must be >= 1 when --eval-poses > 0"),
-    (["--p", "1.5"], "--p must be in (0, 1)"),
+    (["--p", "1.5"], "--p must"),
     (["--mesh", "/nonexistent/part.obj"], "mesh file not found"),
     (["small_box", "small_box"], "given twice"),
 ])
 def test_learn_cli_bad_input_fails_fast(argv, match, capsys, monkeypatch, tmp_path):
     def unreachable(*a, **k):
-        raise AssertionError("bad input reached online.run")
+        raise AssertionError("bad input reached runner.run")
 
-    monkeypatch.setattr(online, "run", unreachable)
+    monkeypatch.setattr(runner, "run", unreachable)
     monkeypatch.setattr(artifacts, "DATA_DIR", tmp_path / "no_theta0")  # no shipped θ0
     artifacts._load.cache_clear()
     t = time.perf_counter()
@@ -378,10 +414,10 @@ def test_run_fingerprint_sees_geometry(tiny_theta0, spec):
                             vertices=tuple(tuple(2 * x for x in v) for v in g.vertices))
         for g in spec.geoms))
     assert scaled.name == spec.name
-    assert (online.run_fingerprint(CONFIG, [spec], tiny_theta0)
-            != online.run_fingerprint(CONFIG, [scaled], tiny_theta0))
-    assert (online.run_fingerprint(CONFIG, [spec], tiny_theta0)
-            == online.run_fingerprint(CONFIG, [objects.make_object(OBJECT)], tiny_theta0))
+    assert (runner.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            != runner.run_fingerprint(CONFIG, [scaled], tiny_theta0))
+    assert (runner.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            == runner.run_fingerprint(CONFIG, [objects.make_object(OBJECT)], tiny_theta0))
 
 
 def test_learn_cli_zero_rounds_is_an_argument_error(capsys):
@@ -409,3 +445,77 @@ def test_learn_cli_subprocess_one_line_no_traceback(argv, match, tmp_path):
     assert len(lines) == 1 and match in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr
     assert seconds < 30  # interpreter and imports only: nothing compiles
+
+
+# ----------------------------------------------------------------------------- learners
+
+
+REFERENCE = __import__("pathlib").Path(__file__).parent / "data" / "learn_reference.npz"
+
+
+def test_same_results_as_the_pre_refactor_runner(run_a):
+    """The learners behind the interface reproduce the pre-refactor online.run (commit
+    2b20d9d) bit for bit on CONFIG: every figure, the table, the data sets and each copy's
+    final parameters. tests/grasp/data/learn_reference.npz was written by that code."""
+    import hashlib
+    import json
+
+    res, _, _ = run_a
+    ref = np.load(REFERENCE)
+    for name in res["results"]._fields:
+        np.testing.assert_array_equal(getattr(res["results"], name), ref[name], err_msg=name)
+    old_table = json.loads(str(ref["table"]))
+    assert [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]] \
+        == old_table
+    digests = json.loads(str(ref["params_digest"]))
+    for q, name in enumerate(CONFIG.policies):
+        state = res["states"][q]
+        for s in range(CONFIG.num_seeds):
+            h = hashlib.sha256()
+            for leaf in jax.tree.leaves(state.params):
+                h.update(np.ascontiguousarray(np.asarray(leaf)[0, s]).tobytes())
+            assert h.hexdigest() == digests[f"{name}/{s}"], (name, s)
+        for got, want in ((state.buffer.reward, "buffer_label"),
+                          (state.buffer.weight, "buffer_weight")):
+            np.testing.assert_array_equal(np.asarray(got)[0, :, :CONFIG.horizon],
+                                          ref[want][0, :, q])
+
+
+def _uniform_learner(no_arm: bool = False) -> lbase.Learner:
+    """A toy learner in a few lines: uniform over the valid candidates, learns nothing
+    (``no_arm``: a broken one that never chooses)."""
+    def init(key, theta0, core_set):
+        return lbase.LearnerState(theta0, (), lbase.empty_buffer(core_set, CONFIG.horizon), ())
+
+    def act(key, state, obs):
+        probs = pol.epsilon_greedy_probs(jnp.zeros(obs.valid.shape), 1.0, obs.valid)
+        action = pol.sample_icdf(obs.u, probs, mask=obs.valid)
+        return (jnp.int32(pol.NO_ARM) if no_arm else action), probs, state
+
+    def update(key, state, batch):
+        return state._replace(buffer=lbase.append(state.buffer, batch))
+
+    return lbase.Learner(init, act, update)
+
+
+def test_toy_learner_runs_through_the_runner(tiny_theta0, spec, tmp_path):
+    config = dataclasses.replace(CONFIG, policies=("greedy",), num_seeds=1, eval_poses=0)
+    res = runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+                     log=_quiet, learners={"greedy": _uniform_learner()})
+    action = res["results"].explore_action[1:, 0, 0, 0]  # [R, E]
+    assert ((action >= 0) & (action < 64)).all()
+    assert int(res["states"][0].buffer.count[0, 0]) == config.horizon
+    # another learner under a registered name is another run: its directory is refused
+    with pytest.raises(ValueError, match="different learning run"):
+        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+
+
+def test_learner_returning_no_grasp_stops_the_run(tiny_theta0, spec, tmp_path):
+    """NO_ARM while valid candidates exist is a broken learner, not a failed grasp."""
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1,
+                                 eval_poses=0)
+    with pytest.raises(runner.LearnerError,
+                       match=r"learner 'greedy' returned no grasp \(NO_ARM\) on "
+                             r"triangular_prism, seed 0, round 1, grasp 0 while \d+ "):
+        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet,
+                   learners={"greedy": _uniform_learner(no_arm=True)})

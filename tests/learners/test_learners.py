@@ -183,7 +183,7 @@ def test_bad_names_and_train_config():
         registry.check_names(("sern", "sern"))
     with pytest.raises(ValueError, match="at least one"):
         registry.check_names(())
-    with pytest.raises(ValueError, match="^--learning-rate"):
+    with pytest.raises(ValueError, match="^learning_rate"):
         dataclasses.replace(TRAIN, learning_rate=1e-39)
     with pytest.raises(ValueError, match="^--fit-steps"):
         dataclasses.replace(TRAIN, fit_steps=0)

@@ -446,7 +446,8 @@ def machine(*, devices: bool = False) -> dict[str, Any]:
     """The machine a figure was measured on: the one machine-description helper.
 
     Keys: ``cpu`` (model name), ``processor``, ``machine`` (architecture), ``cpu_count``,
-    ``system``, ``platform``, ``python``, ``load_average_1m``; with ``devices=True`` also
+    ``cores_usable`` (this process's CPU affinity), ``system``, ``platform``, ``python``,
+    ``load_average_1m``; with ``devices=True`` also
     ``jax_backend`` and ``jax_devices`` (imports jax). Used by :func:`run_metadata` (its
     ``host``) and by the benchmarks' ``machine`` field.
     """
@@ -455,6 +456,8 @@ def machine(*, devices: bool = False) -> dict[str, Any]:
         "processor": platform.processor() or platform.machine(),
         "machine": platform.machine(),
         "cpu_count": os.cpu_count(),
+        "cores_usable": (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                         else os.cpu_count()),
         "system": platform.system(),
         "platform": platform.platform(),
         "python": platform.python_version(),

@@ -354,7 +354,8 @@ def _pct(v) -> str:
 
 
 def format_table(rows: list[dict]) -> str:
-    """The paper's Table I layout: Round i mean (± std over seeds), Max, Imprv."""
+    """The paper's Table I layout: Round i mean (± population SD over seeds), Max, Imprv;
+    a line under the table says which statistic the ± is."""
     num_r = len(rows[0]["rounds"])
     head = (["Obj.", "Alg.", "θ0"] + [f"Round {i + 1}" for i in range(num_r)]
             + ["Max.", "Imprv."])
@@ -364,6 +365,9 @@ def format_table(rows: list[dict]) -> str:
         cells += [f"{m:.0f}% (±{s:.2f})" for m, s in zip(r["rounds"], r["std"])]
         cells += [_pct(r["max"]), "—" if r["imprv"] is None else f"{100 * r['imprv']:.0f}%"]
         lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "(± = population standard deviation over the seeds, ddof 0: `std` in "
+              "table.json, which also has `sd` (ddof 1) and `se` = sd/√seeds, the statistic "
+              "the paper's Table I prints in parentheses.)"]
     if "lowvar_rounds" in rows[0]:
         lines += ["", "Low-variance evaluation (greedy success probability on fixed poses, "
                   "mean over seeds; round 0 = θ0):", ""]

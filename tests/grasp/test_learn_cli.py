@@ -49,7 +49,8 @@ def test_format_table():
     assert lines[1] == "|---|---|---|---|---|---|---|"
     assert lines[2] == "| box | sern | 50% | 30% (±10.00) | 60% (±0.00) | 60% | 100% |"
     assert lines[3] == "| box | greedy | 20% | 0% (±0.00) | 30% (±10.00) | 30% | — |"
-    assert len(lines) == 4
+    assert len(lines) == 6 and lines[4] == ""
+    assert "population standard deviation" in lines[5] and "`se`" in lines[5]
     # a decline is a negative improvement
     declining = [dict(rows[0], rounds=[80.0, 60.0], max=80.0, imprv=-0.25)]
     assert learn_cli.format_table(declining).splitlines()[2].endswith("| 80% | -25% |")

@@ -213,9 +213,7 @@ def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print) -> P
                  {"experiment": exp, "fingerprint": exp.fingerprint(), "checkpoints": t})
     chunk = min(exp.chunk_size, exp.num_seeds)
     ranges = [(a, min(a + chunk, exp.num_seeds)) for a in range(0, exp.num_seeds, chunk)]
-    from sern_jax import executor
-
-    per_call = math.ceil(chunk / executor.concurrent_calls())
+    per_call = chunk  # one call at a time (neural_runner.run_seeds: workers=1)
     bar = _tab._progress_bar(len(runs) * exp.num_seeds, progress)
     for policy, run in runs:
         for a, b in ranges:

@@ -4,9 +4,10 @@ Workload (issue 19): the wheel bandit (δ = 0.95 by default), one learner of the
 (Neural-Linear Thompson by default) on the MLP of :mod:`sern_jax.networks`, updates every
 ``update_every`` rounds, S seeds × T rounds. Two ways of running it, in one process:
 
-* ``batched``: :func:`sern_jax.neural_runner.run_seeds`, i.e. ``jit(vmap(scan))`` over seeds in
-  fixed-shape calls (one per core at once on CPU); compile time is measured separately
-  (``.lower().compile()``) and excluded; the figure is the median of ``repeats`` runs.
+* ``batched``: the program :func:`sern_jax.neural_runner.run_seeds` runs, ``jit(vmap(scan))``
+  over seeds, in calls of ``chunk_size`` seeds (default: all in one call), one at a time;
+  compile time is measured separately (``.lower().compile()``) and excluded; the figure is
+  the median of ``repeats`` runs (padded seeds of a last partial chunk count as computed).
 * ``python_loop``: the reference a researcher writes first: one seed at a time, a Python
   loop over rounds calling the jitted ``learner.act`` on each decision and the jitted
   ``learner.update`` after each phase, with the same environment draws (the runner's
@@ -166,7 +167,12 @@ def machine() -> dict:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count()
-    return {"cpu": cpu, "cores_usable": cores, "backend": jax.default_backend(),
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = None
+    return {"cpu": cpu, "cores_usable": cores, "load_average_1min": load,
+            "backend": jax.default_backend(),
             "devices": [str(d) for d in jax.devices()]}
 
 
@@ -176,36 +182,45 @@ def run_bench(config: NeuralBenchConfig, log=None) -> dict:
     run = nr.make_run(run_cfg, problem, learner, model)
     out = {"workload": {**dataclasses.asdict(config), "problem": problem.name},
            "machine": machine(), "jax": jax.__version__}
-    # ---- batched: compile once (timed separately), then repeats
-    workers = nr.executor.concurrent_calls()
-    chunk = config.chunk_size or -(-config.num_seeds // workers)
+    # ---- batched: compile once (timed separately), then repeats of the compiled calls
+    chunk = config.chunk_size or config.num_seeds
     t0 = time.perf_counter()
-    nr._batched(run).lower(jax.ShapeDtypeStruct((chunk,), jax.random.key(0).dtype)).compile()
+    compiled = nr._batched(run).lower(
+        jax.ShapeDtypeStruct((chunk,), jax.random.key(0).dtype)).compile()
     out["batched_compile_s"] = time.perf_counter() - t0
+    root = jax.random.key(0)
+    starts = range(0, config.num_seeds, chunk)
+    keys = [jax.block_until_ready(seed_keys(root, chunk, a)) for a in starts]
     if config.repeats:
-        times = []
+        times, cpu = [], []
         for _ in range(config.repeats):
-            t0 = time.perf_counter()
-            res = nr.run_seeds(run, 0, config.num_seeds, chunk_size=chunk, workers=workers)
+            t0, c0 = time.perf_counter(), time.process_time()
+            results = [compiled(k) for k in keys]  # one call at a time (run_seeds' default)
+            jax.block_until_ready(results)
             times.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
             if log:
                 log(f"batched: {times[-1]:.1f} s")
         wall = statistics.median(times)
+        regret = np.concatenate([np.asarray(r.regret_rb[:, -1]) for r in results])
         out["batched"] = {"seconds": wall, "seed_rounds_per_s":
-                          config.num_seeds * config.horizon / wall,
-                          "chunk": chunk, "workers": workers, "runs": len(times),
-                          "regret_rb_T_mean": float(np.mean(res.regret_rb[:, -1]))}
+                          len(starts) * chunk * config.horizon / wall,
+                          "cpu_seconds": statistics.median(cpu),
+                          "seeds_computed": len(starts) * chunk, "chunk": chunk,
+                          "runs": len(times),
+                          "regret_rb_T_mean": float(regret[:config.num_seeds].mean())}
     # ---- per-seed Python loop over the same jitted act/update
     if config.loop_seeds:
         keys = seed_keys(jax.random.key(0), config.loop_seeds)
         python_loop(problem, model, learner, config.update_every, keys[0],
                     config.update_every)  # compile act / update / env (not timed)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for i in range(config.loop_seeds):
             python_loop(problem, model, learner, config.update_every, keys[i],
                         config.loop_rounds)
         wall = time.perf_counter() - t0
-        out["python_loop"] = {"seconds": wall, "seeds": config.loop_seeds,
+        out["python_loop"] = {"seconds": wall, "cpu_seconds": time.process_time() - c0,
+                              "seeds": config.loop_seeds,
                               "rounds": config.loop_rounds,
                               "seed_rounds_per_s": config.loop_seeds * config.loop_rounds / wall}
         if log:

@@ -43,7 +43,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import executor
 from sern_jax import policies as pol
 from sern_jax.contextual_problems import ContextualBandit
 from sern_jax.learners import base
@@ -352,8 +351,10 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
 
     Every call has ``chunk_size`` seeds (the last one padded), so any ``num_seeds`` shares
     one compilation; seed i uses ``fold_in(key(seed), i)`` whatever the chunking. Calls run
-    ``workers`` at a time from host threads (default: :func:`executor.concurrent_calls`: one
-    per core on CPU, where a compiled call runs on one core).
+    ``workers`` at a time from host threads (default 1: one call at a time, which XLA
+    parallelises inside. Two concurrent calls of a Neural-Linear program on the 2-core CPU
+    hung with both threads waiting for their results, the intra-op thread pool apparently
+    starved; the tabular executor's one-call-per-core rule is not used here).
     """
     if isinstance(num_seeds, bool) or not isinstance(num_seeds, (int, np.integer)) \
             or num_seeds < 1:
@@ -361,7 +362,7 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
     if isinstance(first_seed, bool) or int(first_seed) < 0 or \
             int(first_seed) + num_seeds > 2**32:
         raise ValueError(f"first_seed must be in [0, 2^32 - num_seeds], got {first_seed!r}")
-    workers = executor.concurrent_calls() if workers is None else max(1, int(workers))
+    workers = 1 if workers is None else max(1, int(workers))
     if chunk_size is None:
         chunk_size = -(-num_seeds // workers)
     chunk = int(chunk_size)

@@ -519,3 +519,46 @@ def test_learner_returning_no_grasp_stops_the_run(tiny_theta0, spec, tmp_path):
                              r"triangular_prism, seed 0, round 1, grasp 0 while \d+ "):
         runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet,
                    learners={"greedy": _uniform_learner(no_arm=True)})
+
+
+def _registered_flags():
+    from sern_jax.learners import registry
+
+    return sorted(f.metadata["flag"] for f in registry.hyperparameters().values())
+
+
+@pytest.mark.parametrize("flag", _registered_flags())
+def test_every_learner_flag_refuses_nan_in_one_line(flag, capsys, monkeypatch, tmp_path):
+    """Every registered learner's hyperparameter is a flag of `sern grasp learn`, and a
+    non-number there is a one-line error naming it, exit 2, before anything runs."""
+    def unreachable(*a, **k):
+        raise AssertionError("bad input reached runner.run")
+
+    monkeypatch.setattr(runner, "run", unreachable)
+    monkeypatch.setattr(artifacts, "DATA_DIR", tmp_path / "no_theta0")
+    artifacts._load.cache_clear()
+    try:
+        status = cli.main(["grasp", "learn", "--out", str(tmp_path / "run"), flag, "nan"])
+    except SystemExit as exc:  # argparse's own type errors (an int flag)
+        status = exc.code
+    err = capsys.readouterr().err
+    assert status == 2
+    assert flag in err and err.count("\n") == 1, err
+
+
+@pytest.mark.slow  # the paper's setting: ~260 s on the idle 2-core machine
+def test_paper_setting_table_unchanged(tmp_path):
+    """`sern grasp learn`'s defaults (six hard objects, sern/egreedy/greedy, 5 seeds, 5
+    rounds) give the Table I of the pre-refactor code bit for bit (data/table1_reference.json,
+    written by online.run at 2b20d9d on the 2-core CPU machine; XLA on another machine or a
+    GPU may move near-ties, docs/LEARNING.md)."""
+    import json
+
+    want = json.loads((REFERENCE.parent / "table1_reference.json").read_text())
+    theta0 = artifacts.load_theta0()
+    specs = [objects.make_object(n) for n in artifacts.hard_set(theta0)["objects"]]
+    res = runner.run(runner.OnlineConfig(), specs, tmp_path, theta0=theta0, progress=False,
+                     log=_quiet)
+    got = [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]]
+    assert got == want["table"]
+    assert res["trial_counts"] == want["trial_counts"]

@@ -11,7 +11,7 @@ of contexts (``context.make_contexts``) and estimates every valid candidate's su
 probability from ``num_trials`` randomised trials (``GraspSimulator.success_probability``);
 ``step`` then draws Bernoulli(p̂). The table is also the oracle a regret computation needs
 (:func:`expected_reward`, :func:`best_reward`). For outcomes from live physics, use
-:func:`online.run` (native MuJoCo or MJX trials per grasp).
+:func:`runner.run` (native MuJoCo or MJX trials per grasp).
 """
 
 from __future__ import annotations

@@ -127,3 +127,19 @@ def test_script_folders_import_each_other_only_through_sern_jax_or_relative():
         for p in (ROOT / folder).glob("*.py"):
             tops = {n.split(".")[0] for n in _imported_names(p)}
             assert not tops & set(SCRIPT_FOLDERS), (p, tops & set(SCRIPT_FOLDERS))
+
+
+def test_sern_experiment_lists_runs_and_refuses(capsys):
+    from sern_jax.commands import main as cli
+
+    assert cli.main(["experiment", "--list"]) == 0
+    listed = capsys.readouterr().out.split()
+    assert {"grasp_learning", "hard_objects", "regret"} <= set(listed)
+    assert cli.main(["experiment", "no_such_experiment"]) == 2
+    assert "unknown experiment" in capsys.readouterr().err
+    assert cli.main(["experiment", "regret"]) == 2  # no command line of its own
+    assert "sern regret" in capsys.readouterr().err
+    with __import__("pytest").raises(SystemExit) as exc:  # the experiment's own --help
+        cli.main(["experiment", "hard_objects", "--help"])
+    assert exc.value.code == 0
+    assert "sern experiment hard_objects" in capsys.readouterr().out

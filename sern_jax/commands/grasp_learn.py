@@ -494,6 +494,12 @@ def check_learn_args(args, num_objects: int | None = None):
     from sern_jax.grasp import runner
 
     hyper = learner_hyperparameters(args)
+    from sern_jax.learners import registry
+
+    # every learner's float hyperparameter (UCB width, prior variance, ε/α schedules, ...):
+    # finite and representable in float32 (its own range is its config's check, below)
+    validate.float32_hyperparameters(
+        hyper, {n: f.metadata["flag"] for n, f in registry.hyperparameters().items()})
     try:
         config = runner.OnlineConfig(
             policies=policies, num_seeds=args.seeds, rounds=args.rounds,
@@ -555,7 +561,9 @@ def _check_learn_size(config, num_objects: int, out) -> None:
         rounds=config.rounds, explore=config.explore, evaluate=config.evaluate,
         eval_poses=config.eval_poses, eval_trials=config.eval_trials,
         regret_trials=config.regret_trials, fit_steps=config.fit_steps,
-        batch_size=config.batch_size), out)
+        batch_size=config.batch_size,
+        network_copies=sum(config.hyperparameters().get("ensemble_size", 1)
+                           if name == "ensemble_ts" else 1 for name in config.policies)), out)
 
 
 def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:

@@ -174,7 +174,8 @@ def screen(*, objects: int, poses: int, trials: int) -> Estimate:
 
 def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
           evaluate: int, eval_poses: int, eval_trials: int, regret_trials: int,
-          fit_steps: int = 40, batch_size: int = 32) -> Estimate:
+          fit_steps: int = 40, batch_size: int = 32,
+          network_copies: int | None = None) -> Estimate:
     """``sern grasp learn``: O objects x Q policies x S seeds, R rounds of E exploration
     grasps, V greedy evaluations, the low-variance evaluation (P fixed poses x M trials) and
     the regret oracle (every valid candidate of every exploration pose, regret_trials times).
@@ -182,10 +183,12 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     Memory: the learner's buffer [O, S, Q, R*E] crops (twice: the checkpoint is compressed
     from a copy), the O*S*Q network copies with Adam moments, one round's exploration
     contexts and crops [O, S, E, K], the fixed evaluation poses [O, S, P] with their crops,
-    their repeated trials [O, S, Q, P*M] and one object's oracle batch [S, E, K, regret]."""
+    their repeated trials [O, S, Q, P*M] and one object's oracle batch [S, E, K, regret].
+    ``network_copies``: networks (with Adam moments) per (object, seed) over all learners,
+    default one per learner (an ensemble learner holds ``--ensemble-size``)."""
     o, q, s, r, e = objects, policies, seeds, rounds, explore
     buffer = o * s * q * r * e * (CROP_BYTES + 12)
-    copies = o * s * q * PARAM_COPY_BYTES
+    copies = o * s * (q if network_copies is None else network_copies) * PARAM_COPY_BYTES
     round_ctx = o * s * e * (CONTEXT_BYTES + K * (CROP_BYTES + 8 * q))
     eval_ctx = o * s * evaluate * (CONTEXT_BYTES + K * (CROP_BYTES + 8 * q))
     lowvar = o * s * eval_poses * (CONTEXT_BYTES + K * (CROP_BYTES + 8 * q))
@@ -193,8 +196,8 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     oracle = s * e * K * regret_trials * TRIAL_ROW_BYTES
     fit = o * s * q * batch_size * CROP_BYTES * 4
     memory_parts = {
-        "objects x --seeds x policies x --rounds x --explore": 3 * buffer + 3 * copies
-        + round_ctx + fit,
+        "objects x --seeds x policies x --rounds x --explore": 3 * buffer + round_ctx + fit,
+        "objects x --seeds x policies (x --ensemble-size)": 3 * copies,
         "objects x --seeds x --evaluate": eval_ctx,
         "objects x --seeds x --eval-poses": lowvar,
         "--eval-poses x --eval-trials": lowvar_trials,

@@ -15,8 +15,9 @@ did not choose) is not in Z. The runners act on a whole exploration phase with o
 (a batched bandit, like NeuralTS's ``--delay``), so Z takes the phase's E gradients in
 ``update``, before the network's optax step, rather than after each grasp; the network is
 fine-tuned by the same update as every learner (the released code runs SGD with weight
-decay λ to convergence instead). ``act`` needs K per-candidate gradients (a ``jacrev`` over
-the K outputs), which is what this learner costs over SERN (README, speed).
+decay λ to convergence instead). ``act`` needs K per-candidate gradients (K backward passes,
+run one candidate after another to bound memory), which is what this learner costs over
+SERN (the round-time benchmark in ``experiments.grasp_baselines bench``).
 
 ``probs`` is the one-hot of the played candidate's ties (π of an argmax policy).
 """
@@ -34,7 +35,8 @@ from sern_jax import policies as pol
 from sern_jax.learners import base
 from sern_jax.types import Array, Key
 
-__all__ = ["NeuralUCBConfig", "NeuralUCBExtra", "candidate_gradients", "neural_ucb"]
+__all__ = ["NeuralUCBConfig", "NeuralUCBExtra", "candidate_gradients", "candidate_widths",
+           "neural_ucb"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,17 +61,35 @@ class NeuralUCBExtra(NamedTuple):
     nu: Array  # [] float32 ν
 
 
+def _row_gradient(model: base.Model, params, row: tuple) -> Array:
+    """``∇_θ r̂`` of one candidate (``row``: each input without its K axis), flattened [P]."""
+    g = jax.grad(lambda tr: model.apply(model.merge(params, tr), *row))(
+        model.trainable(params))
+    return ravel_pytree(g)[0]
+
+
 def candidate_gradients(model: base.Model, params, inputs: tuple) -> Array:
     """``∇_θ r̂`` of every row of ``inputs`` (each [K, ...]) over ``model.trainable(params)``,
-    flattened: [K, P]."""
-    trained = model.trainable(params)
+    flattened: [K, P] (one backward pass per row; for small K and P: ``act`` never holds
+    all K gradients, see :func:`candidate_widths`)."""
+    return jax.vmap(lambda *row: _row_gradient(model, params, row))(*inputs)
 
-    def r_hat(tr):
-        return model.apply(model.merge(params, tr), *inputs)  # [K]
 
-    jac = jax.jacrev(r_hat)(trained)  # leaves [K, ...leaf]
-    k = inputs[0].shape[0]
-    return jnp.concatenate([jnp.reshape(x, (k, -1)) for x in jax.tree.leaves(jac)], axis=1)
+def candidate_widths(model: base.Model, params, inputs: tuple, scale: Array) -> Array:
+    """``Σ_p scale_p g_p²`` of every row of ``inputs`` (each [K, ...]): [K]. The rows run
+    one after another (``lax.map``), so memory holds one gradient [P] per lane, not K
+    (vmapped over a phase's grasps and the copies, all K would be O × S × E × K × P)."""
+
+    def one(row):
+        g = _row_gradient(model, params, row)
+        return jnp.sum(scale * g * g)
+
+    return jax.lax.map(one, inputs)
+
+
+def _squared_gradients(model: base.Model, params, inputs: tuple) -> Array:
+    """``g ⊙ g`` of every row of ``inputs`` (each [E, ...]), one row at a time: [E, P]."""
+    return jax.lax.map(lambda row: jnp.square(_row_gradient(model, params, row)), inputs)
 
 
 def neural_ucb(model: base.Model, train: base.TrainConfig,
@@ -89,15 +109,15 @@ def neural_ucb(model: base.Model, train: base.TrainConfig,
         del key
         ex = state.extra
         r_hat = model.apply(state.params, *obs.inputs)  # [K]
-        g = candidate_gradients(model, state.params, obs.inputs)  # [K, P]
-        width = jnp.sqrt(ex.ucb_lambda * ex.nu * jnp.sum(g * g / ex.z_diag[None, :], axis=1))
+        width = jnp.sqrt(candidate_widths(model, state.params, obs.inputs,
+                                          ex.ucb_lambda * ex.nu / ex.z_diag))
         probs = pol.greedy_probs(r_hat + width, mask=obs.valid)
         return pol.sample_icdf(obs.u, probs, mask=obs.valid), probs, state
 
     def update(key: Key, state: base.LearnerState, batch: base.Batch) -> base.LearnerState:
-        g = candidate_gradients(model, state.params, batch.inputs)  # [E, P], θ as played
+        g2 = _squared_gradients(model, state.params, batch.inputs)  # [E, P], θ as played
         played = (batch.action >= 0).astype(jnp.float32)
-        z_diag = state.extra.z_diag + jnp.sum(played[:, None] * g * g, axis=0)
+        z_diag = state.extra.z_diag + jnp.sum(played[:, None] * g2, axis=0)
         state = state._replace(extra=state.extra._replace(z_diag=z_diag))
         return neural_update(key, state, batch)
 

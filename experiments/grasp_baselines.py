@@ -1,0 +1,415 @@
+"""SERN against the exploration strategies the field uses now, at the same grasp budget
+(issue 18): every registered learner on the shipped hard set, the paper's rounds.
+
+    python -m experiments.grasp_baselines bench              # round time per learner vs sern
+    python -m experiments.grasp_baselines tune   --out DIR   # main knobs, on other objects
+    python -m experiments.grasp_baselines run    --out DIR   # the comparison (20 seeds)
+    python -m experiments.grasp_baselines summarize --out DIR
+
+All learners share θ0, the core set, the update (40 Adam steps on D ∪ C after each phase of
+20 grasps) and the budget (R = 5 rounds of 20 exploration + 5 evaluation grasps), and, within
+a seed, the poses, candidate sets, inverse-CDF uniforms and trial noise (common random
+numbers: differences are paired by seed).
+
+Fair tuning (``tune``): each learner's main knob takes the same number of settings
+(:data:`GRID`, three each, the paper's/default value among them) on objects that are not among
+the six reported (:data:`TUNING_OBJECTS`: the three non-hard named objects with the lowest θ0
+greedy success in the shipped screen); the setting with the highest mean low-variance greedy
+success over rounds 1..R (mean over tuning objects and seeds) is kept. ``greedy`` and
+``normalized`` have no knob (one setting).
+
+Per learner (``summarize``, from the saved per-seed results only): successes during
+exploration (what a robot owner pays for), final low-variance greedy success, per-round
+pseudo-regret (when ``--regret-trials`` > 0); paired differences against SERN over seeds
+(each seed's value is the mean over the six objects), Student-t intervals (n − 1 dof) and
+Holm's correction over the comparisons of each metric (``sern_jax.stats``).
+
+Files under ``--out``: ``tune/setting<i>/`` and ``run/`` (the runner's resumable run
+directories), ``tuned.json`` (every tuning score and the choice), ``per_seed.npz`` (the
+reported runs' per-seed figures, [R + 1, O, Q, S]), ``meta.json``, ``summary.json``,
+``table.md``; ``figures/make_grasp_baselines_fig.py`` draws from them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+TUNING_OBJECTS = ("detergent_bottle", "round_stapler", "bracket")
+REFERENCE = "sern"
+# learner -> (hyperparameter field, three settings); the default / paper value is among them
+GRID = {
+    "sern": ("alpha", (0.02, 0.05, 0.1)),
+    "sern_log": ("alpha0", (0.07, 0.28, 1.0)),  # α = α0/ln(T^p) = 0.05, 0.2, 0.72 at T = 100
+    "sern_decay": ("decay_alpha0", (0.05, 0.1, 0.2)),
+    "egreedy": ("epsilon", (0.05, 0.1, 0.2)),
+    "egreedy_decay": ("decay_epsilon0", (0.5, 1.0, 2.0)),
+    "neural_linucb": ("ucb_width", (0.25, 1.0, 4.0)),
+    "neural_lints": ("lambda_prior", (0.05, 0.25, 1.25)),  # prior variance σ²/λ
+    "ensemble_ts": ("ensemble_size", (2, 3, 5)),
+    "neural_ucb": ("nu", (0.1, 1.0, 10.0)),
+}
+NO_KNOB = ("greedy", "normalized")
+_CONFIG_FIELDS = ("alpha", "epsilon", "alpha0", "p")  # OnlineConfig's own fields
+DEFAULT_OUT = Path("experiments/results/grasp_baselines")
+
+
+def learners() -> tuple[str, ...]:
+    from sern_jax.learners import registry
+
+    return registry.names()
+
+
+def online_config(policies, values: dict, **kw):
+    """An OnlineConfig with learner hyperparameters ``values`` (field name -> value)."""
+    from sern_jax.grasp import runner
+
+    own = {k: v for k, v in values.items() if k in _CONFIG_FIELDS}
+    hyper = {k: v for k, v in values.items() if k not in _CONFIG_FIELDS}
+    return runner.OnlineConfig(policies=tuple(policies), hyper=hyper, **own, **kw)
+
+
+def _specs(names):
+    from sern_jax.grasp import objects as objects_lib
+
+    return [objects_lib.make_object(n) for n in names]
+
+
+def hard_specs():
+    """The shipped hard set's specs (the six reported objects) and θ0."""
+    from sern_jax.grasp import artifacts
+
+    theta0 = artifacts.load_theta0()
+    return _specs(artifacts.hard_set(theta0)["objects"]), theta0
+
+
+def _run(config, specs, out_dir, theta0, progress):
+    from sern_jax.grasp import runner
+
+    t = time.perf_counter()
+    res = runner.run(config, specs, out_dir, theta0=theta0, progress=progress)
+    return res, time.perf_counter() - t
+
+
+# ----------------------------------------------------------------------------- tune
+
+
+def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool) -> dict:
+    """Runs the GRID's settings on TUNING_OBJECTS; writes and returns ``tuned.json``."""
+    from sern_jax.grasp import artifacts
+
+    theta0 = artifacts.load_theta0()
+    hard = set(artifacts.hard_set(theta0)["objects"])
+    if hard & set(TUNING_OBJECTS):
+        raise SystemExit(f"tuning objects {sorted(hard & set(TUNING_OBJECTS))} are reported")
+    specs = _specs(TUNING_OBJECTS)
+    knobbed = tuple(n for n in learners() if n in GRID)
+    scores = {n: [] for n in knobbed}
+    wall = []
+    for i in range(3):
+        values = {GRID[n][0]: GRID[n][1][i] for n in knobbed}
+        config = online_config(knobbed, values, num_seeds=seeds, rounds=rounds,
+                               backend=backend)
+        res, secs = _run(config, specs, out / "tune" / f"setting{i}", theta0, progress)
+        wall.append(secs)
+        lowvar = np.asarray(res["results"].lowvar_eval)  # [R + 1, O, Q, S]
+        for q, n in enumerate(config.policies):
+            scores[n].append(float(lowvar[1:, :, q, :].mean()))
+    choice = {n: GRID[n][1][int(np.argmax(scores[n]))] for n in knobbed}
+    doc = {"objects": list(TUNING_OBJECTS), "seeds": seeds, "rounds": rounds,
+           "criterion": ("mean low-variance greedy success over rounds 1..R, tuning "
+                         "objects and seeds"),
+           "grid": {n: {"field": GRID[n][0], "settings": list(GRID[n][1]),
+                        "scores": scores[n], "chosen": choice[n]} for n in knobbed},
+           "no_knob": list(NO_KNOB), "wall_s": wall}
+    (out / "tuned.json").write_text(json.dumps(doc, indent=1))
+    return doc
+
+
+def tuned_values(out: Path, untuned: bool) -> dict:
+    """Field name -> value for the reported run: the tuned choice, or the defaults."""
+    if untuned:
+        return {}
+    path = out / "tuned.json"
+    if not path.exists():
+        raise SystemExit(f"{path} is missing: run `tune` first, or pass --untuned")
+    doc = json.loads(path.read_text())
+    return {g["field"]: g["chosen"] for g in doc["grid"].values()}
+
+
+# ----------------------------------------------------------------------------- run
+
+
+def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
+        num_objects: int | None, progress: bool, explore: int = 20,
+        run_dir: Path | None = None) -> None:
+    """The reported comparison. ``meta.json`` is written first and ``per_seed.npz`` from the
+    runner's checkpoint, so a run stopped after some rounds still leaves its finished rounds
+    (``collect``); ``run_dir`` (default ``out/run``) holds the runner's resumable run
+    directory, whose checkpoint (the learners' states) is large."""
+    from sern_jax import io
+
+    specs, theta0 = hard_specs()
+    specs = specs[:num_objects] if num_objects else specs
+    values = tuned_values(out, untuned)
+    config = online_config(learners(), values, num_seeds=seeds, rounds=rounds,
+                           explore=explore, regret_trials=regret_trials, backend=backend)
+    run_dir = run_dir or out / "run"
+    out.mkdir(parents=True, exist_ok=True)
+    meta = io.run_metadata(
+        experiment="grasp_baselines", objects=[s.name for s in specs],
+        learners=list(config.policies), reference=REFERENCE,
+        hyperparameters=config.hyperparameters(), tuned=not untuned, num_seeds=seeds,
+        rounds=rounds, explore=config.explore, evaluate=config.evaluate,
+        eval_poses=config.eval_poses, eval_trials=config.eval_trials,
+        regret_trials=regret_trials, backend=backend, run_dir=str(run_dir),
+        command="python -m experiments.grasp_baselines run " + " ".join(sys.argv[2:]),
+        axes="[R + 1, O, Q, S]: round (0 = θ0), object, learner, seed")
+    (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
+    res, secs = _run(config, specs, run_dir, theta0, progress)
+    meta.update(wall_s=secs, timings=res["timings"], trial_counts=res["trial_counts"])
+    (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
+    collect(out)
+
+
+def collect(out: Path) -> None:
+    """``per_seed.npz`` from the run directory's checkpoint (the finished rounds only; a
+    stopped run records ``rounds_completed`` in meta.json), then :func:`summarize`."""
+    from sern_jax import io
+
+    meta = json.loads((out / "meta.json").read_text())
+    saved = io.load_npz(Path(meta["run_dir"]) / "checkpoint.npz")
+    done = int(saved["next_round"])  # rounds 0 .. done - 1 are finished
+    if done < 2:
+        raise SystemExit(f"only {done} round(s) finished: nothing to compare")
+    fields = ("paper_eval", "lowvar_eval", "explore_success", "pseudo_regret")
+    np.savez_compressed(out / "per_seed.npz",
+                        **{f: np.asarray(saved[f])[:done].astype(np.float32) for f in fields})
+    meta["rounds_completed"] = done - 1
+    (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
+    summarize(out)
+
+
+# ----------------------------------------------------------------------------- summary
+
+
+def per_seed_metrics(per_seed: dict, meta: dict) -> dict:
+    """Per learner, per seed (mean over objects): metric -> [Q, S]."""
+    explore = per_seed["explore_success"][1:]  # [R, O, Q, S]
+    lowvar = per_seed["lowvar_eval"]
+    out = {
+        "explore_success": explore.mean(axis=(0, 1)),  # fraction of exploration grasps
+        "final_lowvar": lowvar[-1].mean(axis=0),
+        "paper_eval_mean": per_seed["paper_eval"][1:].mean(axis=(0, 1)),
+    }
+    regret = per_seed["pseudo_regret"][1:]
+    if meta.get("regret_trials") and np.isfinite(regret).all():
+        out["pseudo_regret_per_round"] = regret.mean(axis=(0, 1))  # per round, 20 grasps
+    return out
+
+
+def summarize(out: Path) -> dict:
+    """summary.json and table.md from per_seed.npz and meta.json (nothing recomputed)."""
+    from sern_jax import stats
+
+    per_seed = dict(np.load(out / "per_seed.npz"))
+    meta = json.loads((out / "meta.json").read_text())
+    names = meta["learners"]
+    ref = names.index(REFERENCE)
+    others = [i for i in range(len(names)) if i != ref]
+    metrics = per_seed_metrics(per_seed, meta)
+    summary = {"learners": names, "objects": meta["objects"], "num_seeds": meta["num_seeds"],
+               "rounds": int(per_seed["lowvar_eval"].shape[0] - 1),
+               "rounds_planned": meta["rounds"], "reference": REFERENCE, "level": 0.95,
+               "intervals": ("Student t over seeds (n - 1 dof), each seed = mean over the "
+                             "objects; Holm over the comparisons of each metric"),
+               "metrics": {}}
+    for metric, values in metrics.items():
+        diffs = stats.paired_differences(values[others], values[ref],
+                                         names=[f"{names[i]} - {REFERENCE}" for i in others])
+        ci = stats.t_interval(values, 0.95)
+        summary["metrics"][metric] = {
+            "mean": {n: float(ci.mean[q]) for q, n in enumerate(names)},
+            "sd": {n: float(ci.sd[q]) for q, n in enumerate(names)},
+            "se": {n: float(ci.se[q]) for q, n in enumerate(names)},
+            "paired": [d._asdict() for d in diffs],
+        }
+    if "pseudo_regret_per_round" in metrics:
+        pr = per_seed["pseudo_regret"][1:].mean(axis=1)  # [R, Q, S]
+        summary["pseudo_regret_by_round"] = {n: [float(v) for v in pr[:, q].mean(-1)]
+                                             for q, n in enumerate(names)}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "table.md").write_text(table_md(summary))
+    print(table_md(summary))
+    return summary
+
+
+def table_md(summary: dict) -> str:
+    names = summary["learners"]
+    head = (f"Learners vs {summary['reference']} on {', '.join(summary['objects'])}; "
+            f"{summary['num_seeds']} seeds; {summary['rounds']} of "
+            f"{summary['rounds_planned']} rounds; {summary['intervals']}.")
+    lines = [head, ""]
+    for metric, m in summary["metrics"].items():
+        scale = 100.0 if metric != "pseudo_regret_per_round" else 1.0
+        unit = "%" if scale == 100.0 else ""
+        header = (f"| learner | mean ± SE{unit and ' (%)'} | − {summary['reference']} "
+                  "(95 % t CI) | p (Holm) | resolved |")
+        lines += [f"### {metric}", "", header, "|---|---|---|---|---|"]
+        paired = {p["name"].split(" - ")[0]: p for p in m["paired"]}
+        for n in names:
+            row = f"| {n} | {scale * m['mean'][n]:.1f} ± {scale * m['se'][n]:.1f} |"
+            p = paired.get(n)
+            if p is None:
+                row += " (reference) | | |"
+            else:
+                row += (f" {scale * p['mean']:+.1f} [{scale * p['lower']:+.1f}, "
+                        f"{scale * p['upper']:+.1f}] | {p['pvalue_holm']:.3g} | "
+                        f"{'yes' if p['resolved'] else 'no'} |")
+            lines.append(row)
+        lines.append("")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- bench
+
+
+def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
+    """Time of one round's learner work (act over a phase of E = 20 grasps, update, greedy
+    on the 5 + 4 evaluation poses) for every learner, in this process, compiles excluded,
+    on the shipped θ0 network and core set with O × S copies; the learners are timed in
+    turn, ``repeats`` times, and each figure is the median. Contexts, crops and trials are
+    shared by the learners (the same for all) and not timed here."""
+    import jax
+    import jax.numpy as jnp
+
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, runner
+    from sern_jax.learners import base as lbase
+    from sern_jax.learners import registry
+
+    theta0 = artifacts.load_theta0()
+    model = runner.quality_model(runner.copies_network(theta0.network.config))
+    core = runner.core_data("dpp", theta0)
+    config = runner.OnlineConfig(policies=("sern",))
+    train = config.train_config()
+    num_o, num_s = copies
+    e, k, n_eval = config.explore, 64, config.evaluate + config.eval_poses
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, core.reward.shape[0], (num_o, num_s, e, k))
+    image = jnp.asarray(np.asarray(core.inputs[0])[idx])
+    depth = jnp.asarray(np.asarray(core.inputs[1])[idx])
+    valid = jnp.asarray(rng.random((num_o, num_s, e, k)) < 0.9)
+    u = jnp.asarray(rng.random((num_o, num_s, e)), jnp.float32)
+    keys = jax.vmap(lambda o: jax.vmap(lambda s: jax.random.fold_in(
+        jax.random.fold_in(jax.random.key(0), o), s))(jnp.arange(num_s)))(jnp.arange(num_o))
+    names = tuple(names or registry.names())
+    work = {}
+    for name in names:
+        lrn = registry.make(name, model, train, config.learner_config(name))
+        state = runner._batched_init(lrn.init)(keys, theta0.params, core)
+        act = runner._batched_act(lrn.act)
+        update = runner._batched_update(lrn.update)
+        greedy = runner._batched_greedy(runner._predict(lrn, model))
+
+        def one_round(state, act=act, update=update, greedy=greedy):
+            action, _ = act(keys, state, image, depth, valid, u, jnp.int32(0))
+            a = jnp.maximum(action, 0)
+            pick = jax.vmap(jax.vmap(jax.vmap(lambda x, i: x[i])))
+            batch = lbase.Batch((pick(image, a), pick(depth, a)), action,
+                                jnp.ones(action.shape, jnp.float32))
+            t0 = time.perf_counter()
+            jax.block_until_ready(action)
+            new = update(keys, state, batch)
+            jax.block_until_ready(new)
+            t1 = time.perf_counter()
+            g = greedy(new, image[:, :, :n_eval], depth[:, :, :n_eval], valid[:, :, :n_eval],
+                       u[:, :, :n_eval])
+            jax.block_until_ready(g)
+            return t1 - t0, time.perf_counter() - t1
+
+        def timed(state, one_round=one_round, act=act):
+            t = time.perf_counter()
+            jax.block_until_ready(act(keys, state, image, depth, valid, u, jnp.int32(0)))
+            t_act = time.perf_counter() - t
+            t_upd, t_greedy = one_round(state)
+            return t_act, t_upd, t_greedy
+
+        timed(state)  # compile
+        work[name] = (timed, state, [])
+    for _ in range(repeats):
+        for name in names:
+            timed, state, rows = work[name]
+            rows.append(timed(state))
+    out = {"machine": io.machine(), "copies": [num_o, num_s], "explore": e, "candidates": k,
+           "eval_poses_per_round": n_eval, "repeats": repeats, "learners": {}}
+    ref = None
+    for name in names:
+        rows = np.asarray(work[name][2])
+        med = np.median(rows, axis=0)
+        total = float(np.median(rows.sum(1)))
+        out["learners"][name] = {"act_s": float(med[0]), "update_s": float(med[1]),
+                                 "greedy_s": float(med[2]), "round_s": total}
+        if name == REFERENCE:
+            ref = total
+    if ref:
+        for name in names:
+            out["learners"][name]["vs_sern"] = out["learners"][name]["round_s"] / ref
+    return out
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize"))
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    p.add_argument("--seeds", type=int, default=20)
+    p.add_argument("--tune-seeds", type=int, default=5)
+    p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--explore", type=int, default=20, help="grasps per exploration phase")
+    p.add_argument("--objects", type=int, default=None, help="first N of the hard set")
+    p.add_argument("--regret-trials", type=int, default=0)
+    p.add_argument("--backend", choices=("native", "mjx"), default="native")
+    p.add_argument("--untuned", action="store_true", help="run with every default")
+    p.add_argument("--copies", default="6,5", help="bench: O,S parameter copies")
+    p.add_argument("--repeats", type=int, default=5, help="bench: timed rounds per learner")
+    p.add_argument("--learners", default=None, help="bench: comma-separated subset")
+    p.add_argument("--json-out", type=Path, default=None, help="bench: write the JSON here")
+    p.add_argument("--run-dir", type=Path, default=None,
+                   help="run: the runner's run directory (default OUT/run; large)")
+    p.add_argument("--no-progress", action="store_true")
+    a = p.parse_args(argv)
+    for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
+                    ("--rounds", a.rounds), ("--repeats", a.repeats),
+                    ("--explore", a.explore)):
+        if v < (2 if flag in ("--seeds", "--tune-seeds") else 1):
+            p.error(f"{flag} must be >= {2 if 'seeds' in flag else 1}, got {v}")
+    if a.regret_trials < 0:
+        p.error(f"--regret-trials must be >= 0, got {a.regret_trials}")
+    if a.what == "bench":
+        o, s = (int(v) for v in a.copies.split(","))
+        res = bench((o, s), a.repeats, a.learners.split(",") if a.learners else None)
+        text = json.dumps(res, indent=1)
+        print(text)
+        if a.json_out:
+            a.json_out.parent.mkdir(parents=True, exist_ok=True)
+            a.json_out.write_text(text)
+    elif a.what == "tune":
+        a.out.mkdir(parents=True, exist_ok=True)
+        print(json.dumps(tune(a.out, a.tune_seeds, a.rounds, a.backend, not a.no_progress),
+                         indent=1))
+    elif a.what == "run":
+        run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
+            not a.no_progress, a.explore, a.run_dir)
+    elif a.what == "collect":
+        collect(a.out)
+    else:
+        summarize(a.out)
+
+
+if __name__ == "__main__":
+    main()

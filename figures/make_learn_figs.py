@@ -78,7 +78,10 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         axes[k // cols][k % cols].axis("off")
     axes[0][0].legend(fontsize=6, loc="lower right")
     seeds = paper.shape[-1]
-    fig.suptitle(f"Greedy success per round, mean over {seeds} seeds, 95% t bands", fontsize=11)
+    bands = ("95% t bands over seeds; a band of zero width means every seed gave the "
+             "same value" if seeds > 1 else "one seed: no interval (no bands)")
+    fig.suptitle(f"Greedy success per round, mean over {seeds} seed{'s' * (seeds > 1)}\n"
+                 f"{bands}", fontsize=10)
     fig.tight_layout()
     out = [run_dir / "figures" / "success.png"]
     out[0].parent.mkdir(parents=True, exist_ok=True)

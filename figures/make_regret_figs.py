@@ -50,7 +50,8 @@ def make_figures(run_dir: str | Path) -> list[Path]:
     ax.set_xlabel("round t")
     ax.set_ylabel("cumulative pseudo-regret (Rao–Blackwellised)")
     ax.set_title(f"K={cfg['num_arms']}, {cfg['num_seeds']} seeds, α0={cfg['alpha0']} "
-                 f"({cfg['schedule']}), ε={cfg['epsilon']}\nbands: 95% t interval of the mean; "
+                 f"({cfg['schedule']}), ε={cfg['epsilon']}\nbands: 95% t interval of the mean"
+                 f"{' (one seed: none)' if cfg['num_seeds'] < 2 else ''}; "
                  f"slopes over the last decade")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)

@@ -145,14 +145,38 @@ def tuned_values(out: Path, untuned: bool) -> dict:
 # ----------------------------------------------------------------------------- run
 
 
+RESULTS_ONLY = "results_partial.npz"
+
+
+def _results_only_saves() -> None:
+    """Makes the runner save, after each round, only the per-seed results and the round
+    (``RESULTS_ONLY`` beside the checkpoint) instead of its resumable checkpoint. The
+    checkpoint of 11 learners x 120 copies (buffers, Adam states, ensembles) is ~0.8 GB,
+    compressed and hashed after every round: minutes a short device lease cannot spare.
+    Such a run cannot resume; its finished rounds are still collected."""
+    from sern_jax.grasp import runner as runner_lib
+
+    def save(path, fingerprint, states, horizon, results, next_round):
+        del states, horizon
+        np.savez(Path(path).with_name(RESULTS_ONLY), fingerprint=np.asarray(fingerprint),
+                 next_round=np.asarray(next_round),
+                 **{f: np.asarray(getattr(results, f)) for f in results._fields})
+
+    runner_lib._save = save
+
+
 def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
         num_objects: int | None, progress: bool, explore: int = 20,
-        run_dir: Path | None = None) -> None:
+        run_dir: Path | None = None, checkpoints: bool = True) -> None:
     """The reported comparison. ``meta.json`` is written first and ``per_seed.npz`` from the
     runner's checkpoint, so a run stopped after some rounds still leaves its finished rounds
     (``collect``); ``run_dir`` (default ``out/run``) holds the runner's resumable run
-    directory, whose checkpoint (the learners' states) is large."""
+    directory, whose checkpoint (the learners' states) is large; ``checkpoints=False``
+    saves the results alone (:func:`_results_only_saves`)."""
     from sern_jax import io
+
+    if not checkpoints:
+        _results_only_saves()
 
     specs, theta0 = hard_specs()
     specs = specs[:num_objects] if num_objects else specs
@@ -168,6 +192,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
         rounds=rounds, explore=config.explore, evaluate=config.evaluate,
         eval_poses=config.eval_poses, eval_trials=config.eval_trials,
         regret_trials=regret_trials, backend=backend, run_dir=str(run_dir),
+        checkpoints=checkpoints,
         command="python -m experiments.grasp_baselines run " + " ".join(sys.argv[2:]),
         axes="[R + 1, O, Q, S]: round (0 = θ0), object, learner, seed")
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
@@ -183,7 +208,11 @@ def collect(out: Path) -> None:
     from sern_jax import io
 
     meta = json.loads((out / "meta.json").read_text())
-    saved = io.load_npz(Path(meta["run_dir"]) / "checkpoint.npz")
+    run_dir = Path(meta["run_dir"])
+    if meta.get("checkpoints", True):
+        saved = io.load_npz(run_dir / "checkpoint.npz")
+    else:
+        saved = dict(np.load(run_dir / RESULTS_ONLY))
     done = int(saved["next_round"])  # rounds 0 .. done - 1 are finished
     if done < 2:
         raise SystemExit(f"only {done} round(s) finished: nothing to compare")
@@ -270,7 +299,8 @@ def table_md(summary: dict) -> str:
             else:
                 row += (f" {scale * p['mean']:+.1f} [{scale * p['lower']:+.1f}, "
                         f"{scale * p['upper']:+.1f}] | {p['pvalue_holm']:.3g} | "
-                        f"{'yes' if p['resolved'] else 'no'} |")
+                        f"{'yes' if p['resolved'] else 'no'}"
+                        f"{' (sd 0: every seed the same)' if p['sd'] == 0 else ''} |")
             lines.append(row)
         lines.append("")
     return "\n".join(lines)
@@ -381,6 +411,8 @@ def main(argv=None) -> None:
     p.add_argument("--json-out", type=Path, default=None, help="bench: write the JSON here")
     p.add_argument("--run-dir", type=Path, default=None,
                    help="run: the runner's run directory (default OUT/run; large)")
+    p.add_argument("--results-only", action="store_true",
+                   help="run: save per-round results, not the ~0.8 GB resumable checkpoint")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
     for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
@@ -404,7 +436,7 @@ def main(argv=None) -> None:
                          indent=1))
     elif a.what == "run":
         run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
-            not a.no_progress, a.explore, a.run_dir)
+            not a.no_progress, a.explore, a.run_dir, not a.results_only)
     elif a.what == "collect":
         collect(a.out)
     else:

@@ -52,6 +52,8 @@ CASES = [
     (CHECK, ["--seed", "-1"], "--seed"),
     (CHECK, ["--json-out", "."], "--json-out"),
     (CHECK, ["--json-out", "/proc/x/y.json"], "--json-out"),
+    (CHECK, ["--json-out", "/proc/x.json"], "--json-out"),
+    (CHECK, ["--out", "/proc"], "--out"),
     (CHECK, ["--out", "a_file"], "--out"),
     (CHECK, ["--out", "/proc/x"], "--out"),
     (BENCH_BANDIT, ["--arms", "1000000000"], "--arms"),

@@ -53,31 +53,19 @@ _MAX_SEEDS = 10_000_000  # the largest checks hold O(seeds x horizon) floats per
 
 def _validate(args) -> None:
     """Every option, before any check runs or anything is written."""
-    import os
-    from pathlib import Path
-
     if args.seeds is not None and not 2 <= args.seeds <= _MAX_SEEDS:
         raise ValueError(f"--seeds must lie in [2, {_MAX_SEEDS:,}], got {args.seeds}")
     if not 0.0 < args.alpha < 0.5:
         raise ValueError(f"--alpha must lie in (0, 0.5), got {args.alpha}")
     if not 0 <= args.seed <= 2**32 - 1:
         raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a directory")
-    probe = out
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK):
-        raise ValueError(f"--out {out}: cannot create a run directory there")
+    from sern_jax.commands import validate
+
+    # tried for real (os.access says yes to root on /proc): nothing is left behind
+    validate.out_dir(args.out, "--out")
     if args.name is not None and (not args.name or "/" in args.name or args.name in (".", "..")):
         raise ValueError(f"--name must be a plain directory name, got {args.name!r}")
-    if args.json_out:
-        j = Path(args.json_out)
-        if j.is_dir():
-            raise ValueError(f"--json-out {j} is a directory; name a file")
-        if not j.parent.is_dir() or not os.access(j.parent, os.W_OK):
-            raise ValueError(f"--json-out {j}: cannot write in {j.parent}")
+    validate.out_file(args.json_out, "--json-out")
 
 
 def run(args) -> int:

@@ -127,6 +127,12 @@ class NeuralLinearExtra(NamedTuple):
     ucb_width: Array  # [] float32 (neural_lints: unused, 0)
 
 
+def _dot(a: Array, b: Array) -> Array:
+    """float32 products at full precision: GPUs' default TF32 matmuls (10-bit mantissa)
+    would perturb Λ and μ by ~1e-3 relative."""
+    return jnp.matmul(a, b, precision=jax.lax.Precision.HIGHEST)
+
+
 def design(features: Array) -> Array:
     """[..., d] network features -> [..., d + 1] with the intercept 1 appended."""
     ones = jnp.ones(features.shape[:-1] + (1,), features.dtype)
@@ -151,10 +157,10 @@ def fit_posterior(phi: Array, y: Array, w: Array, lambda_prior: Array, a0: Array
     phi = jnp.asarray(phi, jnp.float32)
     y = jnp.asarray(y, jnp.float32)
     w = jnp.maximum(jnp.asarray(w, jnp.float32), 0.0)
-    precision = lambda_prior * jnp.eye(d, dtype=jnp.float32) + (phi * w[:, None]).T @ phi
+    precision = lambda_prior * jnp.eye(d, dtype=jnp.float32) + _dot((phi * w[:, None]).T, phi)
     chol = jnp.linalg.cholesky(precision)
-    mean = jsl.cho_solve((chol, True), phi.T @ (w * y))
-    resid = y - phi @ mean
+    mean = jsl.cho_solve((chol, True), _dot(phi.T, w * y))
+    resid = y - _dot(phi, mean)
     a = a0 + 0.5 * jnp.sum(w)
     b = b0 + 0.5 * (jnp.sum(w * resid * resid) + lambda_prior * jnp.dot(mean, mean))
     return Posterior(mean, precision, chol, a, b)
@@ -162,7 +168,7 @@ def fit_posterior(phi: Array, y: Array, w: Array, lambda_prior: Array, a0: Array
 
 def posterior_mean(posterior: Posterior, phi: Array) -> Array:
     """[K, d] -> [K] φ·μ."""
-    return phi @ posterior.mean
+    return _dot(phi, posterior.mean)
 
 
 def ucb_index(posterior: Posterior, phi: Array, width: Array) -> Array:
@@ -187,7 +193,7 @@ def thompson_scores(key: Key, posterior: Posterior, phi: Array) -> Array:
     # β = μ + σ L⁻ᵀ z has covariance σ² L⁻ᵀ L⁻¹ = σ² Λ⁻¹.
     beta = posterior.mean + jnp.sqrt(sigma2) * jsl.solve_triangular(
         posterior.chol.T, z, lower=False)
-    return phi @ beta
+    return _dot(phi, beta)
 
 
 def _refit(model: base.Model, state: base.LearnerState) -> base.LearnerState:

@@ -20,12 +20,11 @@ import numpy as np
 
 from sern_jax import io
 from sern_jax import policies as pol
-from sern_jax.grasp import artifacts
+from sern_jax.grasp import artifacts, runner
 from sern_jax.grasp import candidates as cand_lib
 from sern_jax.grasp import context as context_lib
 from sern_jax.grasp import crops as crops_lib
 from sern_jax.grasp import depth as depth_lib
-from sern_jax.grasp import runner
 from sern_jax.learners import base as lbase
 
 __all__ = ["AskTell", "AskTellState"]

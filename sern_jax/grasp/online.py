@@ -6,11 +6,22 @@ learners themselves :mod:`sern_jax.learners`. New code imports those; this modul
 re-exports them (patching a name here does not reach the runner).
 """
 
+from sern_jax.grasp import runner as _runner
 from sern_jax.grasp.asktell import AskTell, AskTellState
 from sern_jax.grasp.runner import (
-    EXPLORE_CONTEXT, EXPLORE_TRIAL, FIT, MJX_BATCH, POLICY_UNIFORM, OnlineConfig, RoundResults,
-    _stream, copies_network, object_key, run_fingerprint, table_rows)
-from sern_jax.grasp import runner as _runner
+    EXPLORE_CONTEXT,
+    EXPLORE_TRIAL,
+    FIT,
+    MJX_BATCH,
+    POLICY_UNIFORM,
+    OnlineConfig,
+    RoundResults,
+    _stream,
+    copies_network,
+    object_key,
+    run_fingerprint,
+    table_rows,
+)
 from sern_jax.learners.registry import names as _names
 
 
@@ -21,6 +32,21 @@ def run(*args, **kwargs):
 
 POLICIES = _names()
 
-__all__ = ["POLICIES", "OnlineConfig", "RoundResults", "object_key", "copies_network", "run",
-           "run_fingerprint", "table_rows", "AskTell", "AskTellState", "MJX_BATCH",
-           "EXPLORE_CONTEXT", "EXPLORE_TRIAL", "POLICY_UNIFORM", "FIT", "_stream"]
+__all__ = [
+    "EXPLORE_CONTEXT",
+    "EXPLORE_TRIAL",
+    "FIT",
+    "MJX_BATCH",
+    "POLICIES",
+    "POLICY_UNIFORM",
+    "AskTell",
+    "AskTellState",
+    "OnlineConfig",
+    "RoundResults",
+    "_stream",
+    "copies_network",
+    "object_key",
+    "run",
+    "run_fingerprint",
+    "table_rows",
+]

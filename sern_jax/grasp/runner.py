@@ -37,16 +37,16 @@ import hashlib
 import json
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import io
+from sern_jax import io, stats
 from sern_jax import policies as pol
-from sern_jax import stats
 from sern_jax.grasp import artifacts
 from sern_jax.grasp import context as context_lib
 from sern_jax.grasp import crops as crops_lib
@@ -57,18 +57,18 @@ from sern_jax.learners import base as lbase
 from sern_jax.learners import registry
 
 __all__ = [
+    "LearnerError",
     "OnlineConfig",
     "RoundResults",
-    "LearnerError",
-    "object_key",
     "copies_network",
-    "quality_model",
-    "train_config",
-    "make_learner",
     "core_data",
+    "make_learner",
+    "object_key",
+    "quality_model",
     "run",
     "run_fingerprint",
     "table_rows",
+    "train_config",
 ]
 
 MJX_BATCH = 2048  # MJX trials per compiled call: one compile per object on a GPU

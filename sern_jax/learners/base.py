@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -40,26 +41,27 @@ from sern_jax import policies as pol
 from sern_jax.types import Array, Key, Params
 
 __all__ = [
+    "FLOAT32_TINY",
+    "LOSSES",
+    "Batch",
+    "Buffer",
+    "Data",
+    "Learner",
+    "LearnerState",
     "Model",
     "Obs",
-    "Batch",
-    "Data",
-    "Buffer",
-    "LearnerState",
-    "Learner",
+    "PolicyExtra",
     "TrainConfig",
-    "FLOAT32_TINY",
+    "append",
+    "bce_loss",
     "check_positive",
     "check_probability",
-    "LOSSES",
-    "bce_loss",
+    "empty_buffer",
     "l1_loss",
     "make_fit",
-    "empty_buffer",
-    "append",
-    "network_predict",
     "make_neural_init",
     "make_neural_update",
+    "network_predict",
     "policy_act",
 ]
 
@@ -152,6 +154,14 @@ class Learner(NamedTuple):
     update: Callable[[Key, LearnerState, Batch], LearnerState]  # after each phase
     predict: Callable[[LearnerState, Obs], Array] | None = None
     #   the learner's point estimate r̂ [K] for greedy evaluation (None: model.apply)
+
+
+class PolicyExtra(NamedTuple):
+    """``extra`` of the learners whose policy is a function of r̂ (sern, sern_log, egreedy,
+    greedy): one state structure, so the runners compile their shared update once."""
+
+    alpha: Array  # [] float32 softmax temperature (traced: a sweep over α is a vmap)
+    epsilon: Array  # [] float32 ε-greedy's exploration probability
 
 
 @dataclasses.dataclass(frozen=True)
@@ -288,7 +298,7 @@ def make_fit(model: Model, optimizer: optax.GradientTransformation, loss="bce",
             inputs = tuple(x[idx_t] for x in data.inputs)
             new_params, new_opt_state, value = train_step(
                 params, opt_state, inputs, data.reward[idx_t], ones)
-            keep = lambda new, old: jax.tree.map(  # noqa: E731
+            keep = lambda new, old: jax.tree.map(
                 lambda a, b: jnp.where(has_data, a, b), new, old)
             return (keep(new_params, params), keep(new_opt_state, opt_state)), value
 
@@ -324,8 +334,10 @@ def append(buffer: Buffer, batch: Batch) -> Buffer:
                   at + batch.action.shape[0])
 
 
+@functools.lru_cache(maxsize=32)
 def network_predict(model: Model):
-    """``predict(state, obs) -> r̂ [K]``: the network's estimate (greedy evaluation)."""
+    """``predict(state, obs) -> r̂ [K]``: the network's estimate (greedy evaluation). Cached:
+    learners over one model share the function (and the runners its compile)."""
 
     def predict(state: LearnerState, obs: Obs) -> Array:
         return model.apply(state.params, *obs.inputs)
@@ -344,7 +356,7 @@ def make_neural_init(model: Model, train: TrainConfig, extra_fn: Callable[[Key],
     return init
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _optimizer(learning_rate: float) -> optax.GradientTransformation:
     return optax.adam(learning_rate)
 

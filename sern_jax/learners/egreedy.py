@@ -4,14 +4,13 @@ candidates (``policies.epsilon_greedy_probs``); the paper's peer with ε = 0.1."
 from __future__ import annotations
 
 import dataclasses
-from typing import NamedTuple
 
-import jax.numpy as jnp
+import numpy as np
 
 from sern_jax import policies as pol
 from sern_jax.learners import base
 
-__all__ = ["EGreedyConfig", "EGreedyExtra", "egreedy"]
+__all__ = ["EGreedyConfig", "egreedy"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,10 +22,6 @@ class EGreedyConfig:
         base.check_probability("--epsilon", self.epsilon)
 
 
-class EGreedyExtra(NamedTuple):
-    epsilon: jnp.ndarray  # [] float32 (traced)
-
-
 def _probs(r_hat, valid, state, obs):
     del obs
     return pol.epsilon_greedy_probs(r_hat, state.extra.epsilon, mask=valid)
@@ -34,7 +29,7 @@ def _probs(r_hat, valid, state, obs):
 
 def egreedy(model: base.Model, train: base.TrainConfig,
             config: EGreedyConfig = EGreedyConfig()) -> base.Learner:
-    extra = EGreedyExtra(jnp.float32(config.epsilon))
+    extra = base.PolicyExtra(np.float32(1.0), np.float32(config.epsilon))  # α unused
     return base.Learner(
         init=base.make_neural_init(model, train, lambda key: extra),
         act=base.policy_act(model, _probs),

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from sern_jax import policies as pol
 from sern_jax.learners import base
 
@@ -24,8 +26,9 @@ def _probs(r_hat, valid, state, obs):
 def greedy(model: base.Model, train: base.TrainConfig,
            config: GreedyConfig = GreedyConfig()) -> base.Learner:
     del config
+    extra = base.PolicyExtra(np.float32(1.0), np.float32(0.0))
     return base.Learner(
-        init=base.make_neural_init(model, train, lambda key: ()),
+        init=base.make_neural_init(model, train, lambda key: extra),
         act=base.policy_act(model, _probs),
         update=base.make_neural_update(model, train),
         predict=base.network_predict(model))

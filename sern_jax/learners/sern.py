@@ -9,15 +9,14 @@ Algorithm 1's optax step on D ∪ C (``base.make_neural_update``).
 from __future__ import annotations
 
 import dataclasses
-from typing import NamedTuple
 
-import jax.numpy as jnp
+import numpy as np
 
 from sern_jax import policies as pol
 from sern_jax import schedules
 from sern_jax.learners import base
 
-__all__ = ["SernConfig", "SernLogConfig", "SernExtra", "sern", "sern_log"]
+__all__ = ["SernConfig", "SernLogConfig", "sern", "sern_log"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,17 +54,13 @@ class SernLogConfig:
                                    alpha)
 
 
-class SernExtra(NamedTuple):
-    alpha: jnp.ndarray  # [] float32 temperature (traced: a sweep over α is a vmap)
-
-
 def _softmax(r_hat, valid, state, obs):
     del obs
     return pol.softmax_probs(r_hat, state.extra.alpha, mask=valid)
 
 
 def _make(model: base.Model, train: base.TrainConfig, alpha: float) -> base.Learner:
-    extra = SernExtra(jnp.float32(alpha))
+    extra = base.PolicyExtra(np.float32(alpha), np.float32(0.0))
     return base.Learner(
         init=base.make_neural_init(model, train, lambda key: extra),
         act=base.policy_act(model, _softmax),

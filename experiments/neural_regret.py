@@ -118,6 +118,9 @@ def _check(exp: NeuralRegretExperiment) -> None:
                         ("--gap", exp.gap)):
         if not math.isfinite(value):
             raise ValueError(f"{flag} must be a finite number, got {value!r}")
+    if not exp.learning_rate >= float(np.finfo(np.float32).tiny) or exp.learning_rate > 1e30:
+        raise ValueError(f"--learning-rate must be a positive normal float32 number, got "
+                         f"{exp.learning_rate!r}")
     if exp.schedule != "constant":
         raise ValueError(f"--schedule applies to the tabular estimators; with --estimator "
                          f"neural use --policies sern (fixed --alpha) or sern_log "

@@ -138,3 +138,116 @@ def test_screen_with_fresh_trials():
                 round(r["best_success_fresh"], 2)) == (g, b, f)
         assert r["hard"] is hard and pretrain.is_hard(r) is hard
         assert r["best_success_fresh"] == pytest.approx(np.mean(r["best_fresh_per_pose"]))
+
+
+# --- The theory on grasping, corrected (experiments/results/theory_grasping) ---
+
+THEORY = RESULTS / "theory_grasping"
+
+
+def test_rms_errors_removes_the_ground_truths_binomial_error():
+    from experiments.theory_on_grasping import rms_errors
+
+    rng = np.random.default_rng(0)
+    c, k, m = 400, 64, 16
+    r = rng.uniform(0, 1, (c, k))
+    f = rng.binomial(m, r) / m
+    valid = rng.uniform(size=(c, k)) < 0.9
+    mm = np.full((c, k), m)
+    # a perfect estimator: the corrected error is ~0, the uncorrected one sits at the floor
+    deb, raw, floor = rms_errors(r, f, mm, valid)
+    assert np.mean(deb ** 2) < 2e-3 and np.mean(raw ** 2) > 0.008
+    assert np.mean(raw ** 2) == pytest.approx(np.mean(floor ** 2), rel=0.1)
+    # an estimator off by 0.2 everywhere: the corrected RMS recovers 0.2, the raw one does not
+    deb, raw, _ = rms_errors(np.clip(r + 0.2, 0, 1), f, mm, valid)
+    true = np.sqrt(np.mean(np.where(valid, (np.clip(r + 0.2, 0, 1) - r) ** 2, 0).sum(1)
+                           / valid.sum(1)))
+    assert np.sqrt(np.mean(deb ** 2)) == pytest.approx(true, rel=0.03)
+    assert np.sqrt(np.mean(raw ** 2)) > true * 1.1
+
+
+def test_delta2_split_test_on_synthetic_candidates():
+    from experiments.theory_on_grasping import _split_test
+
+    rng = np.random.default_rng(1)
+    # two equal candidates (Δ2 = 0): the one-sided test rejects ~5 % of the time, not more
+    p_eq = [_split_test((rng.uniform(size=(4, 256)) < [[0.9], [0.9], [0.5], [0.4]])
+                        .astype(float), np.arange(4))[1] for _ in range(400)]
+    assert np.mean(np.asarray(p_eq) < 0.05) < 0.09
+    # a gap of 0.3 between the best two is found on independent halves
+    p_gap = [_split_test((rng.uniform(size=(4, 256)) < [[0.9], [0.6], [0.5], [0.4]])
+                         .astype(float), np.arange(4))[1] for _ in range(50)]
+    assert np.mean(np.asarray(p_gap) < 0.05) > 0.95
+
+
+def test_theory_summary_is_what_the_per_context_file_gives():
+    from experiments.theory_on_grasping import summarise_file
+
+    committed = json.loads((THEORY / "results.json").read_text())
+    assert committed["summary"] == json.loads(json.dumps(summarise_file(
+        THEORY / "per_context.npz")))
+
+
+def test_theory_numbers_quoted():
+    from experiments.theory_on_grasping import summarise_file
+
+    z = np.load(THEORY / "per_context.npz")
+    s = summarise_file(THEORY / "per_context.npz")
+    res = json.loads((THEORY / "results.json").read_text())
+    assert res["config"]["objects"] == "pipe_tee,tless_part_a,tless_part_c"
+    assert (res["config"]["contexts"], res["config"]["top"], res["config"]["deep_trials"],
+            res["config"]["seeds"]) == (4, 4, 256, 4)
+    assert res["machine"]["cpu_count"] == 2 and round(res["seconds"]) == 644
+    assert s["contexts"] == 12 and s["seeds"] == 4
+    # the ground truth's own error and the correction
+    assert (round(s["floor_min"], 3), round(s["floor_max"], 3), round(s["floor_median"], 3)) \
+        == (0.013, 0.112, 0.097)
+    em = z["err"].mean(-1)
+    assert (round(em.min(), 2), round(em.max(), 2)) == (0.07, 0.62)
+    assert (round(s["slope_ctx_raw_median"], 2), round(s["slope_ctx_median"], 2)) == (-0.16, -0.18)
+    assert s["error_below_floor_fraction_n160"] == 0 and s["corrected_to_zero_fraction"] == 0
+    # Assumption 3 per context
+    assert (round(s["slope_ctx_min"], 2), round(s["slope_ctx_max"], 2)) == (-0.48, 0.28)
+    assert s["slope_ctx_at_or_below_half_fraction"] == 0
+    po = s["per_object"]
+    assert [(round(po[n]["slope_mean"], 2), round(po[n]["slope_half"], 2)) for n in
+            ("pipe_tee", "tless_part_a", "tless_part_c")] == [(-0.13, 0.03), (-0.18, 0.07),
+                                                             (-0.30, 0.10)]
+    assert [float(f"{po[n]['slope_minus_half_pvalue_holm']:.0e}") for n in
+            ("pipe_tee", "tless_part_a")] == [9e-5, 2e-3]
+    assert round(po["tless_part_c"]["slope_minus_half_pvalue_holm"], 3) == 0.009
+    assert len(s["holm_resolved_slopes"]) == 3
+    assert (em[0, :, 1] > em[0, :, 0]).all()  # pipe_tee: 10 grasps raise the error, 4 poses
+    i = int(np.argmax(np.asarray(po["tless_part_c"]["slope_ctx"])))
+    assert (round(em[2, i, 0], 2), round(em[2, i, -1], 2),
+            round(po["tless_part_c"]["slope_ctx"][i], 2)) == (0.07, 0.20, 0.28)
+    assert (round(s["beta_ctx_min"], 2), round(s["beta_ctx_max"], 2),
+            round(s["beta_ctx_median"], 2)) == (1.37, 4.50, 3.11)
+    assert s["beta_ctx_above_1_fraction"] == 1.0
+    assert (round(s["beta_ctx_min"] ** 2, 1), round(s["beta_ctx_max"] ** 2, 1)) == (1.9, 20.2)
+    # Δ2 at 16, 64, 256 trials
+    d = s["delta2"]
+    assert [(_pct(d[m]["zero_fraction"]), round(d[m]["median"], 3)) for m in
+            ("16", "64", "256")] == [(75.0, 0.0), (25.0, 0.016), (16.7, 0.008)]
+    assert _pct(d["256"]["below_0.05_fraction"]) == 75.0
+    d256 = z["delta2"][..., -1]
+    assert (d256 <= 0.0125).sum() == 9 and (d256 > 0.0125).sum() == 3
+    assert (d256[0] > 0.0125).sum() == 3
+    assert (round(d256[0].max(), 2), round(np.sort(d256[0])[1], 2)) == (0.13, 0.07)
+    sp = s["delta2_split"]
+    assert (sp["trials_per_half"], round(sp["gap_median"], 3), sp["resolved_holm"],
+            sp["contexts"]) == (128, 0.004, 2, 12)
+    assert round(sp["gap_nonpositive_fraction"] * 12) == 6
+    from sern_jax import stats
+
+    split = z["split"].reshape(-1, 3)
+    reject, _ = stats.holm(split[:, 1], alpha=0.05)
+    assert sorted(round(g, 2) for g in split[reject, 0]) == [0.10, 0.16]
+    assert (np.flatnonzero(reject) < 4).all()  # both pipe_tee
+    # Theorem 1 / 4 constants
+    t = res["theory"]
+    assert (float(f"{t['c_paper']:.1e}"), float(f"{t['pi_min_paper']:.1e}")) == (3.2e-11, 3.3e-11)
+    assert (round(t["alpha_schedule_T100"], 2), float(f"{t['c_schedule_T100']:.1e}")) \
+        == (0.72, 3.9e-3)
+    assert t["thm4_log10_T_star_median_beta"] == "inf" or np.isinf(
+        float(t["thm4_log10_T_star_median_beta"]))

@@ -33,6 +33,7 @@ reported runs' per-seed figures, [R + 1, O, Q, S]), ``meta.json``, ``summary.jso
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -189,6 +190,8 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
         experiment="grasp_baselines", objects=[s.name for s in specs],
         learners=list(config.policies), reference=REFERENCE,
         hyperparameters=config.hyperparameters(), tuned=not untuned, num_seeds=seeds,
+        learner_configs={n: dataclasses.asdict(config.learner_config(n))
+                         for n in config.policies},
         rounds=rounds, explore=config.explore, evaluate=config.evaluate,
         eval_poses=config.eval_poses, eval_trials=config.eval_trials,
         regret_trials=regret_trials, backend=backend, run_dir=str(run_dir),

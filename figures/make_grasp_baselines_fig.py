@@ -60,6 +60,7 @@ def make_figures(out: str | Path) -> list[Path]:
         axes[0, 0].plot(rounds, m, label=name, **style)
         axes[0, 0].fill_between(rounds, np.clip(m - h, 0, 100), np.clip(m + h, 0, 100),
                                 alpha=0.08, color=style.get("color"))
+    axes[0, 0].set_xticks(rounds)
     axes[0, 0].set(xlabel="round (0 = θ0)", ylabel="greedy success (%)",
                    title=f"low-variance greedy success, {len(meta['objects'])} objects, "
                          f"{n} seeds (95 % t band)")

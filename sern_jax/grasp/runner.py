@@ -491,13 +491,15 @@ def _check_actions(action, valid, names, specs, round_index):
     """A learner must choose a valid candidate whenever one exists: NO_ARM (or an invalid
     slot) with valid candidates is a broken learner, not a failed grasp."""
     num_valid = valid.sum(-1)  # [O, S, N]
-    chosen_ok = np.take_along_axis(valid[:, :, None], np.maximum(action, 0)[..., None],
-                                   -1)[..., 0]  # [O, S, Q, N]
-    bad = ((action < 0) | ~chosen_ok) & (num_valid[:, :, None] > 0)
+    num_k = valid.shape[-1]
+    in_range = (action >= 0) & (action < num_k)
+    chosen_ok = np.take_along_axis(valid[:, :, None], np.clip(action, 0, num_k - 1)[..., None],
+                                   -1)[..., 0] & in_range  # [O, S, Q, N]
+    bad = ~chosen_ok & ((action != pol.NO_ARM) | (num_valid[:, :, None] > 0))
     if bad.any():
         o, s, q, n = (int(i[0]) for i in np.nonzero(bad))
-        what = "no grasp (NO_ARM)" if action[o, s, q, n] < 0 else (
-            f"invalid candidate {int(action[o, s, q, n])}")
+        what = "no grasp (NO_ARM)" if action[o, s, q, n] == pol.NO_ARM else (
+            f"candidate {int(action[o, s, q, n])}, not a valid slot,")
         raise LearnerError(
             f"learner {names[q]!r} returned {what} on {specs[o].name}, seed {s}, round "
             f"{round_index}, grasp {n} while {int(num_valid[o, s, n])} candidates were valid; "

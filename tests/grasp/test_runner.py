@@ -562,3 +562,19 @@ def test_paper_setting_table_unchanged(tmp_path):
     got = [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]]
     assert got == want["table"]
     assert res["trial_counts"] == want["trial_counts"]
+
+
+def test_check_actions_cases(spec):
+    """NO_ARM is allowed only where nothing is valid; an invalid or out-of-range slot never."""
+    valid = np.zeros((1, 1, 2, 4), bool)  # [O, S, N, K]: grasp 0 has slots 1, 2 valid
+    valid[0, 0, 0, 1:3] = True
+    check = lambda a: runner._check_actions(  # noqa: E731
+        np.asarray(a).reshape(1, 1, 1, 2), valid, ("toy",), [spec], 1)
+    check([1, pol.NO_ARM])  # fine: grasp 1 has nothing valid
+    for action, match in (([pol.NO_ARM, pol.NO_ARM], r"no grasp \(NO_ARM\) .* grasp 0 while 2"),
+                          ([0, pol.NO_ARM], "candidate 0, not a valid slot"),
+                          ([7, pol.NO_ARM], "candidate 7, not a valid slot"),
+                          ([2, 3], "grasp 1 while 0 candidates"),
+                          ([2, -5], "candidate -5, not a valid slot")):
+        with pytest.raises(runner.LearnerError, match=match):
+            check(action)

@@ -137,8 +137,8 @@ class AskTell:
         action, _, _ = self._act(key, state.learner, obs)
         slot = int(action)
         valid = np.asarray(cands.valid, bool)
-        if slot < 0 or not valid[slot]:
-            if valid.any():
+        if not 0 <= slot < len(valid) or not valid[slot]:
+            if valid.any() or slot != pol.NO_ARM:
                 raise runner.LearnerError(
                     f"learner {self.policy!r} returned no valid grasp (slot {slot}) while "
                     f"{int(valid.sum())} candidates were valid")

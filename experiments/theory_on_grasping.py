@@ -1,5 +1,4 @@
-"""The paper's assumptions and theorems on the real grasp pipeline, with the ground truth's
-own error taken into account.
+"""The paper's assumptions and theorems on the grasp pipeline, ground truth's error corrected.
 
 For each object, C resting poses are tabulated with per-trial outcomes (trial i of every
 candidate of a context uses ``fold_in(fold_in(key, 1 + c), i)``, as ``env.make_params`` does,
@@ -25,7 +24,7 @@ binomial error, and this script corrects for it:
   the ``--top`` candidates, the only ones with that many trials). Because the maximum of noisy
   frequencies is biased, Δ2 is also judged on independent trials: the best and second-best are
   ranked on the first half of the deep trials and their gap is valued on the second half, with
-  a one-sided two-proportion test per context and Holm over the contexts.
+  a one-sided Fisher exact test per context and Holm over the contexts.
 * **Theorems 1 and 4 for K = 64**: c = e^{−1/α}/K and π_min at α = 0.05 and at Algorithm 1's
   α(T), and Theorem 4's T* where the median Δ2 (at the deepest M) is above 0.
 
@@ -177,24 +176,28 @@ def _run_trials(simulator, grasps, pose, noise, cand, lo, hi):
     return res.success.reshape(len(cand), hi - lo).astype(float)
 
 
-def _split_test(outcomes, deep_idx):
-    """Rank the deep candidates on the first half of their trials, value the top two on the
-    second half: (gap, one-sided two-proportion p-value for gap > 0, trials per half)."""
+def half_counts(outcomes, deep_idx):
+    """Successes [top, 2] of the deep candidates on the first and second half of their trials,
+    and the trials of the second half."""
+    import numpy as np
+
+    y = np.asarray(outcomes)[deep_idx]  # [top, M]
+    h = y.shape[1] // 2
+    return np.stack([y[:, :h].sum(1), y[:, h:].sum(1)], -1), h, y.shape[1] - h
+
+
+def split_test(counts, n1, n2):
+    """Rank candidates on the first half's successes ``counts[:, 0]`` (of n1), compare the top
+    two on the second half's ``counts[:, 1]`` (of n2, independent trials): (gap of the second
+    half's frequencies, one-sided Fisher exact p-value for "the first-ranked is better", n2)."""
     import numpy as np
     from scipy import stats as sps
 
-    y = outcomes[deep_idx]  # [top, M]
-    h = y.shape[1] // 2
-    first, second = y[:, :h].mean(1), y[:, h:].mean(1)
-    order = np.argsort(-first, kind="stable")
-    a, b = second[order[0]], second[order[1]]
-    gap = float(a - b)
-    pooled = (a + b) / 2
-    se = np.sqrt(2 * pooled * (1 - pooled) / (y.shape[1] - h))
-    p = 0.5 if se == 0 else float(sps.norm.sf(gap / se))
-    if se == 0 and gap > 0:
-        p = 0.0
-    return gap, p, y.shape[1] - h
+    counts = np.asarray(counts)
+    order = np.argsort(-counts[:, 0] / n1, kind="stable")
+    a, b = int(counts[order[0], 1]), int(counts[order[1], 1])
+    p = sps.fisher_exact([[a, n2 - a], [b, n2 - b]], alternative="greater").pvalue
+    return (a - b) / n2, float(p), n2
 
 
 def main(argv=None) -> int:
@@ -257,6 +260,8 @@ def main(argv=None) -> int:
     floor = np.full((n_o, n_c), np.nan)
     d2 = np.full((n_o, n_c, len(ms)), np.nan)
     split = np.full((n_o, n_c, 3), np.nan)
+    halves = np.full((n_o, n_c, args.top, 2), np.nan)  # deep candidates' successes per half
+    succ_all, m_all = [], []  # per object: [C, K] successes and trials per candidate
     for o, name in enumerate(names):
         spec = objects.resolve_object(name)
         key_o = jax.random.fold_in(jax.random.fold_in(root, 0), o)  # stream 0: contexts
@@ -290,10 +295,14 @@ def main(argv=None) -> int:
                     pool = idx if mm == args.trials else deep
                     v = np.sort(outcomes[pool, :mm].mean(1))[::-1]
                     d2[o, c, j] = v[0] - v[1]
-                split[o, c] = _split_test(outcomes, deep)
+                hc, n1, n2 = half_counts(outcomes, deep)
+                halves[o, c, :len(deep)] = hc
+                split[o, c] = split_test(hc[:len(deep)], n1, n2)
             print(f"  {name} pose {c}: {len(idx)} valid, best16 {f16.max():.2f}, "
                   f"Δ2 {np.round(d2[o, c], 3).tolist()} ({time.perf_counter() - t0:.0f} s)",
                   flush=True)
+        succ_all.append(succ)
+        m_all.append(m_of)
         crops = crops_lib.extract_batch(jnp.asarray(ctx.depth), cands)
         f = np.where(m_of > 0, succ / np.maximum(m_of, 1), 0.0)
         floor[o] = rms_errors(f, f, m_of, valid)[2]
@@ -329,8 +338,11 @@ def main(argv=None) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out_dir / "per_context.npz", err=err, err_raw=err_raw, floor=floor,
-                        delta2=d2, split=split, ns=np.asarray(NS), delta2_ms=np.asarray(ms),
-                        objects=np.asarray(names))
+                        delta2=d2, split=split, halves=halves,
+                        successes=np.stack(succ_all), trials=np.stack(m_all),
+                        trials_per_half=np.asarray([args.deep_trials // 2,
+                                                    args.deep_trials - args.deep_trials // 2]),
+                        ns=np.asarray(NS), delta2_ms=np.asarray(ms), objects=np.asarray(names))
     summary = summarise_file(out_dir / "per_context.npz")
     k = 64
     horizon = 100

@@ -167,17 +167,25 @@ def test_rms_errors_removes_the_ground_truths_binomial_error():
 
 
 def test_delta2_split_test_on_synthetic_candidates():
-    from experiments.theory_on_grasping import _split_test
+    from experiments.theory_on_grasping import half_counts, split_test
 
     rng = np.random.default_rng(1)
-    # two equal candidates (Δ2 = 0): the one-sided test rejects ~5 % of the time, not more
-    p_eq = [_split_test((rng.uniform(size=(4, 256)) < [[0.9], [0.9], [0.5], [0.4]])
-                        .astype(float), np.arange(4))[1] for _ in range(400)]
-    assert np.mean(np.asarray(p_eq) < 0.05) < 0.09
-    # a gap of 0.3 between the best two is found on independent halves
-    p_gap = [_split_test((rng.uniform(size=(4, 256)) < [[0.9], [0.6], [0.5], [0.4]])
-                         .astype(float), np.arange(4))[1] for _ in range(50)]
-    assert np.mean(np.asarray(p_gap) < 0.05) > 0.95
+
+    def p_values(probs, reps):
+        out = []
+        for _ in range(reps):
+            y = (rng.uniform(size=(4, 256)) < np.asarray(probs)[:, None]).astype(float)
+            out.append(split_test(*half_counts(y, np.arange(4)))[1])
+        return np.asarray(out)
+
+    # two equal candidates (Δ2 = 0): the one-sided test rejects at most ~5 % of the time
+    assert np.mean(p_values([0.9, 0.9, 0.5, 0.4], 400) < 0.05) < 0.07
+    # a gap of 0.2 between the best two is found on independent halves
+    assert np.mean(p_values([0.9, 0.7, 0.5, 0.4], 50) < 0.05) > 0.9
+    # the ranking uses the first half only: the second half decides the gap's sign
+    counts = np.array([[128, 10], [0, 100], [0, 0], [0, 0]])
+    gap, p, n2 = split_test(counts, 128, 128)
+    assert (gap, n2) == ((10 - 100) / 128, 128) and p > 0.99
 
 
 def test_theory_summary_is_what_the_per_context_file_gives():
@@ -197,7 +205,7 @@ def test_theory_numbers_quoted():
     assert res["config"]["objects"] == "pipe_tee,tless_part_a,tless_part_c"
     assert (res["config"]["contexts"], res["config"]["top"], res["config"]["deep_trials"],
             res["config"]["seeds"]) == (4, 4, 256, 4)
-    assert res["machine"]["cpu_count"] == 2 and round(res["seconds"]) == 644
+    assert res["machine"]["cpu_count"] == 2 and round(res["seconds"]) == 382
     assert s["contexts"] == 12 and s["seeds"] == 4
     # the ground truth's own error and the correction
     assert (round(s["floor_min"], 3), round(s["floor_max"], 3), round(s["floor_median"], 3)) \
@@ -241,6 +249,17 @@ def test_theory_numbers_quoted():
     from sern_jax import stats
 
     split = z["split"].reshape(-1, 3)
+    from experiments.theory_on_grasping import rms_errors, split_test
+
+    n1, n2 = (int(v) for v in z["trials_per_half"])
+    halves = z["halves"].reshape(-1, *z["halves"].shape[2:])
+    assert np.allclose([split_test(h, n1, n2) for h in halves], split)
+    f = z["successes"] / np.maximum(z["trials"], 1)
+    valid = z["trials"] > 0
+    floor = rms_errors(f, f, z["trials"], valid)[2]
+    assert np.allclose(floor, z["floor"])
+    assert set(np.unique(z["trials"][valid])) == {16, 256}
+    assert ((z["trials"] == 256).sum(-1) == 4).all()
     reject, _ = stats.holm(split[:, 1], alpha=0.05)
     assert sorted(round(g, 2) for g in split[reject, 0]) == [0.10, 0.16]
     assert (np.flatnonzero(reject) < 4).all()  # both pipe_tee

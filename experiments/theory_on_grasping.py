@@ -214,15 +214,19 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--out", default="runs/theory_grasping")
     args = parser.parse_args(argv)
+    def bad(message):  # bad input: one line naming the flag, exit 2, before any work
+        print(f"error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
     for name in ("contexts", "trials", "seeds", "steps", "deep_trials"):
         if getattr(args, name) < 1:
-            raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
+            bad(f"--{name.replace('_', '-')} must be >= 1")
     if args.top < 2:
-        raise SystemExit("--top must be >= 2")
+        bad("--top must be >= 2")
     if args.deep_trials < args.trials or args.trials < 2:
-        raise SystemExit("--deep-trials must be >= --trials >= 2")
+        bad("--deep-trials must be >= --trials >= 2")
     if args.seeds < 2:
-        raise SystemExit("--seeds must be >= 2 (intervals over seeds)")
+        bad("--seeds must be >= 2 (intervals over seeds)")
     ms = tuple(m for m in DELTA2_MS if m <= args.deep_trials and m >= args.trials)
 
     import jax
@@ -237,6 +241,12 @@ def main(argv=None) -> int:
     from sern_jax.grasp import quality_net as qn
     from sern_jax.grasp import sim as sim_lib
 
+    if args.objects:
+        for name in args.objects.split(","):
+            try:
+                objects.resolve_object(name)
+            except ValueError:
+                bad(f"--objects: unknown object {name!r} (see sern grasp show --list)")
     t0 = time.perf_counter()
     theta0 = artifacts.load_theta0()
     net = theta0.network

@@ -270,3 +270,17 @@ def test_theory_numbers_quoted():
         == (0.72, 3.9e-3)
     assert t["thm4_log10_T_star_median_beta"] == "inf" or np.isinf(
         float(t["thm4_log10_T_star_median_beta"]))
+
+
+@pytest.mark.parametrize("argv,flag", [(["--seeds", "1"], "--seeds"), (["--top", "1"], "--top"),
+                                       (["--trials", "32"], "--deep-trials"),
+                                       (["--objects", "nope"], "--objects")])
+def test_theory_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, flag):
+    from experiments import theory_on_grasping
+
+    with pytest.raises(SystemExit) as e:
+        theory_on_grasping.main(argv + ["--deep-trials", "16"] * (flag == "--deep-trials")
+                                + ["--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and len(err.splitlines()) == 1 and flag in err
+    assert not (tmp_path / "out").exists()

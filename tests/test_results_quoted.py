@@ -284,3 +284,54 @@ def test_theory_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, flag):
     err = capsys.readouterr().err.strip()
     assert e.value.code == 2 and len(err.splitlines()) == 1 and flag in err
     assert not (tmp_path / "out").exists()
+
+
+def test_theory_other_objects_quoted():
+    from experiments.theory_on_grasping import split_test, summarise_file
+
+    d = RESULTS / "theory_grasping_other"
+    res = json.loads((d / "results.json").read_text())
+    s = summarise_file(d / "per_context.npz")
+    assert res["summary"] == json.loads(json.dumps(s))
+    z = np.load(d / "per_context.npz")
+    assert res["config"]["objects"] == "triangular_prism,handle_jug,tless_part_b"
+    assert (res["config"]["contexts"], res["config"]["top"], res["config"]["deep_trials"],
+            res["config"]["seeds"]) == (4, 4, 256, 4)
+    assert round(res["seconds"]) == 213 and res["machine"]["cpu_count"] == 2
+    n1, n2 = (int(v) for v in z["trials_per_half"])
+    halves = z["halves"].reshape(-1, *z["halves"].shape[2:])
+    assert np.allclose([split_test(h, n1, n2) for h in halves], z["split"].reshape(-1, 3))
+    assert (round(s["floor_min"], 3), round(s["floor_max"], 3), round(s["floor_median"], 3)) \
+        == (0.002, 0.120, 0.064)
+    po = s["per_object"]
+    assert (round(min(po["triangular_prism"]["floor_ctx"]), 3),
+            round(max(po["triangular_prism"]["floor_ctx"]), 3)) == (0.002, 0.021)
+    tried = z["trials"][0] > 0
+    f = z["successes"][0] / np.maximum(z["trials"][0], 1)  # triangular_prism [C, K]
+    all_or_none = [((f[c] == 0) | (f[c] == 1))[tried[c]].mean() for c in range(4)]
+    assert (round(min(all_or_none), 2), round(max(all_or_none), 2)) == (0.83, 0.95)
+    assert (f.max(1) <= 0.0625).sum() == 2
+    assert (round(s["beta_ctx_min"], 2), round(s["beta_ctx_max"], 2)) == (1.65, 4.82)
+    assert s["beta_ctx_above_1_fraction"] == 1.0
+    assert (round(s["slope_ctx_min"], 2), round(s["slope_ctx_max"], 2),
+            round(s["slope_ctx_median"], 2)) == (-0.66, 0.45, -0.18)
+    assert round(s["slope_ctx_at_or_below_half_fraction"] * 12) == 4
+    assert all(v <= -0.5 for v in po["triangular_prism"]["slope_ctx"])
+    em = z["err"].mean(-1)
+    assert (round(em[0, :, 0].min(), 2), round(em[0, :, 0].max(), 2)) == (0.81, 0.87)
+    assert [(round(po[n]["slope_mean"], 2), round(po[n]["slope_half"], 2)) for n in
+            ("triangular_prism", "handle_jug", "tless_part_b")] == [(-0.58, 0.07), (-0.18, 0.05),
+                                                                   (-0.08, 0.02)]
+    assert [float(f"{po[n]['slope_minus_half_pvalue_holm']:.0e}") for n in
+            ("triangular_prism", "handle_jug", "tless_part_b")] == [4e-2, 4e-4, 2e-5]
+    assert ((em[1, :, -1] > em[1, :, -2]).sum()) == 2
+    dd = s["delta2"]
+    assert [(_pct(dd[m]["zero_fraction"]), round(dd[m]["median"], 3)) for m in
+            ("16", "64", "256")] == [(41.7, 0.062), (16.7, 0.023), (8.3, 0.02)]
+    sp = s["delta2_split"]
+    assert (sp["resolved_holm"], sp["contexts"]) == (1, 12)
+    from sern_jax import stats
+
+    split = z["split"].reshape(-1, 3)
+    reject, _ = stats.holm(split[:, 1], alpha=0.05)
+    assert np.flatnonzero(reject).tolist() == [4] and round(split[4, 0], 2) == 0.19

@@ -64,9 +64,10 @@ def make_figure(run_dir: str | Path, out: str | Path | None = None) -> Path:
     bc = np.concatenate([v["beta_ctx"] for v in summ["per_object"].values()])
     ax.hist(bc, bins=20, color="C0")
     ax.yaxis.get_major_locator().set_params(integer=True)
-    ax.axvline(1.0, color="r", lw=1)
-    ax.text(1.0, ax.get_ylim()[1] * 0.9, " β > 1: the bound exceeds 1 at n = 0\n (vacuous there)",
-            fontsize=7, color="r", va="top")
+    ax.axvline(1.0, color="r", lw=1,
+               label="β = 1: right of it β/√(n+1) > 1 at n = 0 (vacuous there)")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_ylim(0, ax.get_ylim()[1] * 1.25)  # room for the legend above the bars
     ax.set_xlabel("β_s = sup_n err_s(n)·√(n + 1) (per context)")
     ax.set_ylabel("contexts")
     ax.set_title(f"(b) β per context: median {b:.2f}, range {summ['beta_ctx_min']:.2f}-"

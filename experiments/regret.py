@@ -168,22 +168,6 @@ def _estimate(exp: RegretExperiment, triples) -> dict:
             "seconds": seed_rounds_s}
 
 
-def _fmt_bytes(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.3g} {unit}"
-        n /= 1024
-    return f"{n:.3g} PiB"
-
-
-def _fmt_time(s: float) -> str:
-    if s < 120:
-        return f"{s:.0f} s"
-    if s < 7200:
-        return f"{s / 60:.0f} min"
-    if s < 172800:
-        return f"{s / 3600:.1f} h"
-    return f"{s / 86400:.3g} days"
 
 
 def check_fits(exp: RegretExperiment, triples, out_dir: Path) -> dict:
@@ -195,20 +179,20 @@ def check_fits(exp: RegretExperiment, triples, out_dir: Path) -> dict:
     if est["memory_bytes"] > avail:
         raise ValueError(
             f"--seeds {exp.num_seeds} x {len(triples)} policies needs about "
-            f"{_fmt_bytes(est['memory_bytes'])} of memory to merge the results, more than the "
-            f"{_fmt_bytes(avail)} available; use fewer --seeds or --checkpoints")
+            f"{io.fmt_bytes(est['memory_bytes'])} of memory to merge the results, more than the "
+            f"{io.fmt_bytes(avail)} available; use fewer --seeds or --checkpoints")
     probe = out_dir
     while not probe.exists() and probe != probe.parent:
         probe = probe.parent
     free = shutil.disk_usage(probe).free
     if est["disk_bytes"] > free:
         raise ValueError(
-            f"the run needs up to {_fmt_bytes(est['disk_bytes'])} of disk under --out {out_dir}, "
-            f"more than the {_fmt_bytes(free)} free; use fewer --seeds or --checkpoints")
+            f"the run needs up to {io.fmt_bytes(est['disk_bytes'])} of disk under --out {out_dir}, "
+            f"more than the {io.fmt_bytes(free)} free; use fewer --seeds or --checkpoints")
     if est["seconds"] > _MAX_DAYS * 86400:
         raise ValueError(
             f"--seeds {exp.num_seeds} x --horizon {exp.horizon} x {len(triples)} policies is "
-            f"estimated at {_fmt_time(est['seconds'])} on this machine, over the "
+            f"estimated at {io.fmt_time(est['seconds'])} on this machine, over the "
             f"{_MAX_DAYS:g}-day limit; use fewer --seeds or a shorter --horizon")
     return est
 
@@ -339,8 +323,8 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             raise ValueError(f"--out {run_dir}: cannot create the run directory there")
         est = check_fits(exp, triples, run_dir)
         if est["seconds"] > 60 and progress:
-            log(f"estimated run time ~{_fmt_time(est['seconds'])} "
-                f"({_fmt_bytes(est['memory_bytes'])} of results)")
+            log(f"estimated run time ~{io.fmt_time(est['seconds'])} "
+                f"({io.fmt_bytes(est['memory_bytes'])} of results)")
         created = not run_dir.exists()
         try:
             run_dir.mkdir(parents=True, exist_ok=True)

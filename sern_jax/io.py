@@ -50,6 +50,8 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "fmt_bytes",
+    "fmt_time",
     "peak_rss_mb",
     "make_run_dir",
     "save_json",
@@ -502,3 +504,23 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
         meta["jax"] = {"error": repr(exc)}
     meta.update(extra)
     return meta
+
+
+def fmt_bytes(n: float) -> str:
+    """A byte count for a message: ``fmt_bytes(3 * 2**30) == '3 GiB'``."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"
+
+
+def fmt_time(s: float) -> str:
+    """A duration in seconds for a message: s, min, h or days."""
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    if s < 172800:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.3g} days"

@@ -25,6 +25,8 @@ import os
 import shutil
 from pathlib import Path
 
+from sern_jax.io import fmt_bytes, fmt_time  # noqa: F401  (re-exported: budget.fmt_*)
+
 __all__ = [
     "Estimate",
     "MAX_DAYS",
@@ -89,24 +91,6 @@ def _cores() -> int:
 
 def _seconds(trials: float, contexts: float, extra: float = 0.0) -> float:
     return (trials / TRIALS_PER_CORE_S + contexts * CONTEXT_CORE_S) / _cores() + extra
-
-
-def fmt_bytes(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.3g} {unit}"
-        n /= 1024
-    return f"{n:.3g} PiB"
-
-
-def fmt_time(s: float) -> str:
-    if s < 120:
-        return f"{s:.0f} s"
-    if s < 7200:
-        return f"{s / 60:.0f} min"
-    if s < 172800:
-        return f"{s / 3600:.1f} h"
-    return f"{s / 86400:.3g} days"
 
 
 def dataset(*, objects: int, poses: int, trials: int, objects_per_shard: int = 10) -> Estimate:

@@ -58,7 +58,7 @@ from sern_jax import simulate as sim
 from sern_jax.types import Array, Key
 
 __all__ = ["supports", "min_alpha", "make_fast_run", "make_batched", "chunk_layout",
-           "threefry2x32", "DEFAULT_BLOCK", "DEFAULT_CPU_CHUNK"]
+           "chunked_over_devices", "threefry2x32", "DEFAULT_BLOCK", "DEFAULT_CPU_CHUNK"]
 
 DEFAULT_BLOCK = 64  # rounds between exact recomputations of the prefix sums
 DEFAULT_CPU_CHUNK = 256  # seeds per lax.map step on CPU: the state stays in L2
@@ -305,8 +305,15 @@ def make_batched(
     equal ``vmap(run)`` seed by seed.
     """
     run = make_fast_run(config, block=block)
-    batched = jax.vmap(run, in_axes=(0, None))
+    return chunked_over_devices(jax.vmap(run, in_axes=(0, None)), chunk, mesh)
 
+
+def chunked_over_devices(batched, chunk: int | None, mesh: "jax.sharding.Mesh | None" = None):
+    """``batched(keys [S], params)`` run in ``lax.map`` chunks of ``chunk`` seeds per device
+    and, with a mesh, ``shard_map``-ped over its first axis (seeds split across devices).
+
+    Shared by the fast runners (:mod:`sern_jax.fast_softmax`, :mod:`sern_jax.fast_thompson`).
+    """
     def local(keys, params):
         size = keys.shape[0]
         if not chunk or chunk >= size:

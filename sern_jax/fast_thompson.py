@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import prng
+from sern_jax import fast_softmax, prng
 from sern_jax import simulate as sim
 from sern_jax.types import Array
 
@@ -183,17 +183,4 @@ def make_batched(
                              compensator=counts.astype(dtype),
                              min_prob=jnp.zeros_like(regret), diag=None)
 
-    def local(keys, params):
-        size = keys.shape[0]
-        if not chunk or chunk >= size:
-            return run_chunk(keys, params)
-        if size % chunk:
-            raise ValueError(f"{size} seeds per device is not a multiple of chunk={chunk}")
-        out = jax.lax.map(lambda k: run_chunk(k, params), keys.reshape(size // chunk, chunk))
-        return jax.tree.map(lambda x: x.reshape((size,) + x.shape[2:]), out)
-
-    if mesh is None:
-        return local
-    spec = jax.sharding.PartitionSpec(mesh.axis_names[0])
-    return jax.shard_map(local, mesh=mesh, in_specs=(spec, jax.sharding.PartitionSpec()),
-                         out_specs=spec, check_vma=False)
+    return fast_softmax.chunked_over_devices(run_chunk, chunk, mesh)

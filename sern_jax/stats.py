@@ -14,7 +14,7 @@ the power statements (smallest detectable excess / probability). The methodology
 * every test reports the smallest violation it could detect.
 
 Means over a handful of seeds (the grasp experiments: 5 to 20 seeds) take Student's t with
-n − 1 degrees of freedom (``t_interval``, ``paired_differences``), never the normal 1.96:
+n − 1 degrees of freedom (``t_interval``, ``paired_differences``), never a normal quantile:
 at n = 5 the normal interval is 29 % too narrow (t_{0.975, 4} = 2.776). ``mean_ci`` keeps the
 normal quantile: it serves the theory checks (``proofs_check``), whose thousands of seeds make
 t and z agree to the third digit and whose p-values (``mean_pvalue``) use the same normal

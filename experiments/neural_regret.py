@@ -80,12 +80,6 @@ def _check(exp: NeuralRegretExperiment) -> None:
     """Option values, naming the flag (before any trace or compile)."""
     from sern_jax.learners import registry
 
-    def integer(flag, value, low, high=None):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low \
-                or (high is not None and value > high):
-            rng = f">= {low}" if high is None else f"in [{low}, {high}]"
-            raise ValueError(f"{flag} must be an integer {rng}, got {value!r}")
-
     if not exp.policies:
         raise ValueError("--policies is empty; give a comma list such as 'sern,greedy,uniform'")
     names = [_learner_name(p) for p in exp.policies]
@@ -98,14 +92,14 @@ def _check(exp: NeuralRegretExperiment) -> None:
             raise ValueError(f"--policies: unknown policy {policy!r} with --estimator neural; "
                              f"choose from {', '.join(known)} (aliases: softmax, "
                              f"epsilon_greedy)")
-    integer("--seeds", exp.num_seeds, 1, 2**32)
-    integer("--horizon", exp.horizon, 1, 2**24)
-    integer("--update-every", exp.update_every, 1)
-    integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
-    integer("--chunk-size", exp.chunk_size, 1)
-    integer("--seed", exp.seed, 0, 2**32 - 1)
-    integer("--fit-steps", exp.fit_steps, 1, 100_000)
-    integer("--batch-size", exp.batch_size, 1, 1_000_000)
+    _tab.check_integer("--seeds", exp.num_seeds, 1, 2**32)
+    _tab.check_integer("--horizon", exp.horizon, 1, 2**24)
+    _tab.check_integer("--update-every", exp.update_every, 1)
+    _tab.check_integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
+    _tab.check_integer("--chunk-size", exp.chunk_size, 1)
+    _tab.check_integer("--seed", exp.seed, 0, 2**32 - 1)
+    _tab.check_integer("--fit-steps", exp.fit_steps, 1, 100_000)
+    _tab.check_integer("--batch-size", exp.batch_size, 1, 1_000_000)
     if exp.horizon % exp.update_every:
         raise ValueError(f"--horizon {exp.horizon} must be a multiple of --update-every "
                          f"{exp.update_every} (rounds come in whole phases)")

@@ -93,29 +93,31 @@ _FAST_RATE = 3.0e6
 _GENERAL_RATE = 1.0e6
 
 
+def check_integer(flag: str, value, low: int, high: int | None = None) -> None:
+    """``value`` is an integer in [low, high] (no bool), or a ValueError naming ``flag``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low \
+            or (high is not None and value > high):
+        rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{flag} must be an integer {rng}, got {value!r}")
+
+
 def _check_cli_values(exp: RegretExperiment) -> None:
     """Checks of the raw option values (before any float32 cast hides them), naming the flag.
 
     ``--horizon`` is at most 2^24 in float32 (reward sums and counts stay exact integers) and
     2^31 − 1 with ``--float64`` (int32 round counters)."""
-    def integer(flag, value, low, high=None):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low \
-                or (high is not None and value > high):
-            rng = f">= {low}" if high is None else f"in [{low}, {high}]"
-            raise ValueError(f"{flag} must be an integer {rng}, got {value!r}")
-
     if not exp.policies:
         raise ValueError("--policies is empty; give a comma list such as 'softmax,greedy'")
     if len(set(exp.policies)) != len(exp.policies):
         raise ValueError(f"--policies lists a policy twice: {','.join(exp.policies)}")
-    integer("--arms", exp.num_arms, 2, 2**20)
-    integer("--contexts", exp.num_contexts, 1, 2**20)
-    integer("--seeds", exp.num_seeds, 1)
-    integer("--horizon", exp.horizon, 1, 2**31 - 1 if exp.float64 else 2**24)
-    integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
-    integer("--chunk-size", exp.chunk_size, 1)
-    integer("--devices", exp.devices, 1)
-    integer("--seed", exp.seed, 0, _MAX_SEED)
+    check_integer("--arms", exp.num_arms, 2, 2**20)
+    check_integer("--contexts", exp.num_contexts, 1, 2**20)
+    check_integer("--seeds", exp.num_seeds, 1)
+    check_integer("--horizon", exp.horizon, 1, 2**31 - 1 if exp.float64 else 2**24)
+    check_integer("--checkpoints", exp.num_checkpoints, 1, 100_000)
+    check_integer("--chunk-size", exp.chunk_size, 1)
+    check_integer("--devices", exp.devices, 1)
+    check_integer("--seed", exp.seed, 0, _MAX_SEED)
     for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p), ("--epsilon", exp.epsilon),
                         ("--gap", exp.gap)):
         if not math.isfinite(value):

@@ -160,7 +160,7 @@ def _paired_lines(learn_dir: Path) -> list[str]:
     if "sern" not in policies or len(policies) < 2:
         return []
     s = policies.index("sern")
-    evals = [("low-variance evaluation", res["lowvar_eval"]),
+    evals = [("fixed-pose evaluation", res["lowvar_eval"]),
              ("5-grasp evaluation", res["paper_eval"])]
     evals = [(n, a) for n, a in evals if np.isfinite(a[-1]).all()]
     names, diffs = [], []
@@ -244,8 +244,8 @@ def _summary(check_doc, check_status, regret_dir, table, timings, out,
         if "lowvar_rounds" in r:
             lowvar.setdefault(r["policy"], []).append(r["lowvar_rounds"][-1])
     if lowvar:
-        lines.append("                low-variance evaluation (fixed poses, many trials), final "
-                     "round: " + ", ".join(f"{p} {sum(v) / len(v):.0f}%"
+        lines.append("                fixed-pose evaluation (greedy success on fixed poses, many "
+                     "trials), final round: " + ", ".join(f"{p} {sum(v) / len(v):.0f}%"
                                            for p, v in lowvar.items()))
     lines += [f"time          : {sum(timings.values()):.0f} s",
               f"report        : {out / 'report.md'}", "=" * 72]

@@ -175,7 +175,7 @@ def test_reproduce_summary_leads_with_paired_t_intervals_and_holm(tmp_path):
     assert "Holm over the 4 differences" in lines[lead] and "Student-t" in lines[lead]
     d = 100 * (lowvar[-1, :, 0, :] - lowvar[-1, :, 2, :]).mean(0)
     half = sps.t.ppf(0.975, s - 1) * d.std(ddof=1) / np.sqrt(s)
-    want = f"SERN − greedy, low-variance evaluation: {d.mean():+.1f} ± {half:.1f} points"
+    want = f"SERN − greedy, fixed-pose evaluation: {d.mean():+.1f} ± {half:.1f} points"
     row = next(ln for ln in lines if want in ln)
     assert row.endswith(": sign resolved")
     assert "better on" not in text

@@ -21,7 +21,7 @@ import numpy as np
 
 from sern_jax import io
 
-__all__ = ["RegretExperiment", "run_experiment", "summarise", "FIELDS"]
+__all__ = ["RegretExperiment", "run_experiment", "compute_chunk", "summarise", "FIELDS"]
 
 FIELDS = ("regret", "regret_paper", "regret_rb", "regret_rb_paper", "counts", "compensator",
           "min_prob")
@@ -280,12 +280,14 @@ def _load_range(saved, start: int, stop: int) -> dict[str, np.ndarray]:
 
 
 def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool = True,
-                   log=print) -> Path:
+                   log=print, ray=None) -> Path:
     """Runs (or resumes) the experiment into ``out_dir``; returns the run directory.
 
     Everything is validated (options, sizes against this machine's memory and disk, an
     existing directory's experiment, the device count) before anything is written; a run that
-    fails before saving any seeds leaves no directory behind.
+    fails before saving any seeds leaves no directory behind. ``ray``: a
+    ``sern_jax.distributed.RayConfig`` runs the missing seed chunks as Ray tasks (each writes
+    its chunk file, as this process would: :func:`compute_chunk`); the same files result.
     """
     import jax
 
@@ -310,6 +312,9 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
                                  f"{old.get('fingerprint')} != {exp.fingerprint()}); "
                                  f"choose another --out or delete it")
         mesh = None
+        if ray is not None and exp.devices > 1:
+            raise ValueError("--devices: with --ray each task runs on one device (ask for "
+                             "GPUs per task with --ray-gpus)")
         if exp.devices > 1:
             from sern_jax.sharding import seed_mesh
 
@@ -338,7 +343,7 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
                 from None
         try:
             with io.run_lock(run_dir):  # one writer per run directory (issue 16)
-                return _run(exp, triples, run_dir, mesh, progress, log)
+                return _run(exp, triples, run_dir, mesh, progress, log, ray)
         except Exception:
             chunk_dir = run_dir / "chunks"
             if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
@@ -346,7 +351,52 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
             raise
 
 
-def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print) -> Path:
+def compute_chunk(exp: RegretExperiment, policy: str, start: int, stop: int, per_call: int,
+                  chunk_dir: str, summary: bool = False, triples=None, mesh=None) -> None:
+    """Seeds [start, stop) of ``policy``, saved atomically as their chunk file in
+    ``chunk_dir``: the unit of work, the same call in this process and in a Ray task (which
+    rebuilds ``triples`` from ``exp``). ``per_call``: seeds per compiled call (the caller's,
+    so that every chunk of a run has one call shape)."""
+    from sern_jax import executor
+
+    with _x64(exp):
+        if triples is None:
+            triples = _configs(exp)
+        _, cfg, params = next(t for t in triples if t[0] == policy)
+        start_time = time.perf_counter()
+        if summary:
+            summ = executor.run_seeds(cfg, params, exp.seed, stop - start, first_seed=start,
+                                      chunk_size=per_call, mesh=mesh, summary=True)
+            io.save_npz(Path(chunk_dir) / _summary_chunk_name(policy, start, stop),
+                        wall_s=np.float64(time.perf_counter() - start_time),
+                        **executor.summary_arrays(summ))
+            return
+        out = executor.run_seeds(cfg, params, exp.seed, stop - start, first_seed=start,
+                                 chunk_size=per_call, mesh=mesh)
+        io.save_npz(Path(chunk_dir) / _chunk_name(policy, start, stop),
+                    wall_s=np.float64(time.perf_counter() - start_time),
+                    **{f: getattr(out, f) for f in FIELDS})
+
+
+def _x64(exp: RegretExperiment):
+    import jax
+
+    return jax.enable_x64() if exp.float64 else _nullcontext()
+
+
+def _ray_chunks(exp, todo, per_call: int, chunk_dir: Path, summary: bool, ray, run_dir: Path,
+                progress: bool, log) -> None:
+    """The missing chunks ``todo`` [(policy, start, stop)] as Ray tasks."""
+    from sern_jax import distributed
+
+    name = _summary_chunk_name if summary else _chunk_name
+    units = [distributed.Unit(name(policy, a, b), compute_chunk,
+                              (exp, policy, a, b, per_call, str(chunk_dir), summary))
+             for policy, a, b in todo]
+    distributed.run_units(units, ray, run_dir, log=log, progress=progress, desc="chunks")
+
+
+def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print, ray=None) -> Path:
     from sern_jax import executor
     from sern_jax import simulate as sim
 
@@ -366,19 +416,17 @@ def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print) -> Path:
     # each core runs its own calls
     per_call = math.ceil(chunk / executor.concurrent_calls(mesh))
     if not exp.per_seed:
-        return _run_summaries(exp, triples, run_dir, mesh, progress, ranges, per_call)
-    bar = _progress_bar(len(triples) * exp.num_seeds, progress)
+        return _run_summaries(exp, triples, run_dir, mesh, progress, ranges, per_call, ray, log)
+    if ray is not None:
+        todo = [(policy, a, b) for policy, _, _ in triples for a, b in ranges
+                if _cover(_saved_ranges(chunk_dir, policy), a, b) is None]
+        _ray_chunks(exp, todo, per_call, chunk_dir, False, ray, run_dir, progress, log)
+    bar = _progress_bar(len(triples) * exp.num_seeds, progress and ray is None)
     for policy, cfg, params in triples:
         for a, b in ranges:
-            if _cover(_saved_ranges(chunk_dir, policy), a, b) is not None:
-                bar.update(b - a)
-                continue
-            start_time = time.perf_counter()
-            out = executor.run_seeds(cfg, params, exp.seed, b - a, first_seed=a,
-                                     chunk_size=per_call, mesh=mesh)
-            io.save_npz(chunk_dir / _chunk_name(policy, a, b),
-                        wall_s=np.float64(time.perf_counter() - start_time),
-                        **{f: getattr(out, f) for f in FIELDS})
+            if _cover(_saved_ranges(chunk_dir, policy), a, b) is None:
+                compute_chunk(exp, policy, a, b, per_call, str(chunk_dir), triples=triples,
+                              mesh=mesh)
             bar.update(b - a)
     bar.close()
     merged, timings = {}, {}
@@ -405,7 +453,7 @@ def _summary_chunk_name(policy: str, start: int, stop: int) -> str:
 
 
 def _run_summaries(exp, triples, run_dir: Path, mesh, progress: bool, ranges,
-                   per_call: int) -> Path:
+                   per_call: int, ray=None, log=print) -> Path:
     """``--no-per-seed``: each chunk of seeds is reduced on the device and saved as its
     summary (kilobytes); a rerun reuses the chunks of exactly the same seed ranges (another
     --chunk-size recomputes), and the chunks merge exactly in seed order (Chan et al.)."""
@@ -413,16 +461,17 @@ def _run_summaries(exp, triples, run_dir: Path, mesh, progress: bool, ranges,
     from sern_jax import simulate as sim
 
     chunk_dir = run_dir / "chunks"
-    bar = _progress_bar(len(triples) * exp.num_seeds, progress)
+    if ray is not None:
+        todo = [(policy, a, b) for policy, _, _ in triples for a, b in ranges
+                if not (chunk_dir / _summary_chunk_name(policy, a, b)).exists()]
+        _ray_chunks(exp, todo, per_call, chunk_dir, True, ray, run_dir, progress, log)
+    bar = _progress_bar(len(triples) * exp.num_seeds, progress and ray is None)
     for policy, cfg, params in triples:
         for a, b in ranges:
             path = chunk_dir / _summary_chunk_name(policy, a, b)
             if not path.exists():
-                start_time = time.perf_counter()
-                summ = executor.run_seeds(cfg, params, exp.seed, b - a, first_seed=a,
-                                          chunk_size=per_call, mesh=mesh, summary=True)
-                io.save_npz(path, wall_s=np.float64(time.perf_counter() - start_time),
-                            **executor.summary_arrays(summ))
+                compute_chunk(exp, policy, a, b, per_call, str(chunk_dir), summary=True,
+                              triples=triples, mesh=mesh)
             bar.update(b - a)
     bar.close()
     merged, summaries, timings = {}, {}, {}

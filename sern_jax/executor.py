@@ -114,7 +114,11 @@ def available_memory_bytes() -> int:
 
 
 def host_workers() -> int:
-    """CPU cores this process may use (its affinity mask where the OS has one)."""
+    """CPU cores this process may use (its affinity mask where the OS has one), or
+    ``SERN_CPU_THREADS`` where set (a Ray task's share of a node: :mod:`sern_jax.distributed`)."""
+    threads = os.environ.get("SERN_CPU_THREADS", "").strip()
+    if threads.isdigit() and int(threads) >= 1:
+        return int(threads)
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:

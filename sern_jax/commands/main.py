@@ -139,8 +139,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):
         return _missing(parser)
+    from sern_jax.distributed import UnitFailedError  # imports no ray
+
     try:
         return int(args.func(args) or 0)
+    except UnitFailedError as exc:  # a --ray unit that failed for good: one line, exit 1
+        print(f"sern: error: {exc}", file=sys.stderr)
+        return 1
     except (ValueError, OverflowError) as exc:
         print(f"sern: error: {exc}", file=sys.stderr)
         return 2

@@ -109,6 +109,9 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="keep statistics over seeds reduced on the device (means, variances, "
                         "min/max, histogram quantiles: kilobytes per chunk) instead of "
                         "per-seed arrays; for very many seeds (no slope interval, no figures)")
+    from sern_jax import distributed  # --ray [ADDRESS]: seed chunks as Ray tasks (issue 20)
+
+    distributed.add_arguments(p)
     p.set_defaults(func=functools.partial(run, defaults=defaults, run_experiment=run_experiment,
                                           make_figures=make_figures))
     return p
@@ -174,7 +177,12 @@ def _run_neural(args, make_figures: Callable | None) -> int:
 def run(args, *, defaults: Any, run_experiment: Callable,
         make_figures: Callable | None = None) -> int:
     """Runs the experiment described by ``args`` (see :func:`add_parser` for the rest)."""
+    from sern_jax import distributed
+
+    ray = distributed.from_args(args)  # None without --ray; bad values: one line, exit 2
     if args.estimator == "neural":
+        if ray is not None:
+            raise ValueError("--ray applies to the tabular estimators, not --estimator neural")
         return _run_neural(args, make_figures)
     if args.problem != "bernoulli":
         raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
@@ -192,7 +200,8 @@ def run(args, *, defaults: Any, run_experiment: Callable,
         float64=args.float64, devices=args.devices,
         **({"per_seed": False} if not args.per_seed else {}))
     out = Path(args.out) if args.out else Path("runs") / f"regret-{exp.fingerprint()}"
-    run_dir = run_experiment(exp, out, progress=not args.no_progress)
+    run_dir = run_experiment(exp, out, progress=not args.no_progress,
+                             **({"ray": ray} if ray is not None else {}))
     print((run_dir / "report.md").read_text())
     if not args.per_seed and not args.no_figures:
         print("figures need per-seed arrays: none drawn with --no-per-seed")

@@ -1,0 +1,312 @@
+"""Ray scale-out (sern_jax.distributed, issue 20): a Ray run writes the same files as the
+single-process run, resumes, retries killed workers, and stops on a failing unit in one line.
+
+The default run uses one local Ray with 2 CPUs for the whole module (started once, ~4 s).
+The ``slow`` test starts a real two-node cluster on loopback (``ray start``), kills a worker
+process mid-run, and compares with the single-process results.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sern_jax import distributed, io
+from sern_jax.commands.main import main
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ["regret", "--policies", "softmax,greedy", "-T", "300", "-S", "48", "--chunk-size",
+        "16", "--no-figures", "--no-progress"]
+
+
+# ----------------------------------------------------------------------- without ray
+
+
+def test_importing_and_running_without_ray_never_imports_ray(tmp_path):
+    code = (
+        "import sys\n"
+        "import sern_jax, sern_jax.distributed, sern_jax.io\n"
+        "from sern_jax.commands.main import main\n"
+        f"assert main({TINY + ['-S', '8', '--out', str(tmp_path / 'r')]!r}) == 0\n"
+        "assert 'ray' not in sys.modules, 'ray was imported'\n"
+        "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().endswith("ok")
+
+
+def test_ray_missing_is_one_line_naming_the_flag_and_extra(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    out = tmp_path / "r"
+    assert main(TINY + ["--ray", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "--ray" in err and ".[ray]" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--ray-workers", "2"], "--ray-workers"),  # a companion without --ray
+    (["--ray", "--ray-workers", "0"], "--ray-workers"),
+    (["--ray", "--ray-cpus", "0"], "--ray-cpus"),
+    (["--ray", "--ray-gpus", "-1"], "--ray-gpus"),
+    (["--ray", "--ray-retries", "-1"], "--ray-retries"),
+    (["--ray", "auto", "--ray-workers", "2"], "--ray-workers"),
+    (["--ray", "--devices", "2"], "--devices"),
+])
+def test_bad_ray_flags_are_one_line(tmp_path, capsys, flags, named):
+    out = tmp_path / "r"
+    assert main(TINY + flags + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and named in err, err
+    assert not out.exists()
+
+
+def test_worker_env_sets_threads_cache_and_platform(tmp_path, monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=2 "
+                                    "intra_op_parallelism_threads=7")
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
+    env = distributed.worker_env(distributed.RayConfig(cpus_per_task=3), tmp_path)
+    assert env["SERN_CPU_THREADS"] == env["OMP_NUM_THREADS"] == "3"
+    assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
+                                        "intra_op_parallelism_threads=3"]
+    assert env["JAX_COMPILATION_CACHE_DIR"] == str(tmp_path.resolve() / ".jax_cache")
+    assert env["JAX_PLATFORMS"] == "cpu"
+    env = distributed.worker_env(distributed.RayConfig(gpus_per_task=0.5), tmp_path)
+    assert "JAX_PLATFORMS" not in env and env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"
+    assert "--xla_cpu_multi_thread_eigen=false" in env["XLA_FLAGS"]
+
+
+def test_executor_host_workers_honours_the_task_share(monkeypatch):
+    from sern_jax import executor
+
+    monkeypatch.setenv("SERN_CPU_THREADS", "3")
+    assert executor.host_workers() == 3
+    monkeypatch.delenv("SERN_CPU_THREADS")
+    assert executor.host_workers() == len(os.sched_getaffinity(0))
+
+
+# ----------------------------------------------------------------------- on a local Ray
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local Ray with 2 CPUs for the module (the commands reuse an initialised Ray)."""
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="ERROR")
+    yield
+    ray.shutdown()
+
+
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    return io.load_npz(path)
+
+
+def _assert_same_arrays(a: dict, b: dict) -> None:
+    assert sorted(a) == sorted(b)
+    for k in a:
+        assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape, k
+        assert np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f"), k
+        assert a[k].tobytes() == b[k].tobytes(), k  # bit for bit (NaN payloads, -0.0)
+
+
+def _chunk_fields(run_dir: Path) -> dict[str, dict]:
+    """Each chunk file's arrays without its wall time (which no two runs share)."""
+    return {p.name: {k: v for k, v in _arrays(p).items() if k != "wall_s"}
+            for p in sorted((run_dir / "chunks").glob("*.npz"))}
+
+
+def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, capsys):
+    one, par = tmp_path / "one", tmp_path / "ray"
+    assert main(TINY + ["--out", str(one)]) == 0
+    assert main(TINY + ["--ray", "--out", str(par)]) == 0
+    assert "Ray: 6 chunks" in capsys.readouterr().out
+    _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+    single = _chunk_fields(one)
+    assert len(single) == 6
+    for name, arrays in _chunk_fields(par).items():
+        _assert_same_arrays(single[name], arrays)
+    assert io.load_json(one / "summary.json") == io.load_json(par / "summary.json")
+    assert any((par / ".jax_cache").iterdir())  # the workers' persistent compile cache
+
+    # an interrupted / damaged run resumes with the same command: one chunk gone, one damaged
+    chunks = sorted((par / "chunks").glob("*.npz"))
+    chunks[0].unlink()
+    chunks[3].write_bytes(chunks[3].read_bytes()[:100])
+    (par / "results.npz").unlink()
+    assert main(TINY + ["--ray", "--out", str(par)]) == 0
+    out = capsys.readouterr().out
+    assert "Ray: 2 chunks" in out and ": damaged (" in out and "-> recomputing" in out
+    _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+
+
+@pytest.mark.slow  # ~30 s on 2 shared cores: the summary runner compiles in every worker
+def test_regret_summaries_on_ray_equal_single_process(local_ray, tmp_path):
+    one, par = tmp_path / "one", tmp_path / "ray"
+    flags = ["regret", "--policies", "softmax", "-T", "300", "-S", "32", "--chunk-size", "16",
+             "--no-figures", "--no-progress", "--no-per-seed"]
+    assert main(flags + ["--out", str(one)]) == 0
+    assert main(flags + ["--ray", "--out", str(par)]) == 0
+    _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+
+
+# fault injection: these unit functions travel by value (tests/ is not importable by workers)
+from ray import cloudpickle  # noqa: E402  (Ray ships its own)
+
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+def _unit_ok(path: str, value: int) -> None:
+    io.save_npz(path, value=np.int64(value))
+
+
+def _unit_fails(path: str, message: str) -> None:
+    raise ValueError(message)
+
+
+def _unit_dies_first_time(path: str, marker: str) -> None:
+    """Kills its own worker process on the first attempt (as `kill -9` would)."""
+    if not os.path.exists(marker):
+        Path(marker).write_text("died once")
+        os.kill(os.getpid(), signal.SIGKILL)
+    io.save_npz(path, value=np.int64(7))
+
+
+def test_killed_worker_is_retried(local_ray, tmp_path):
+    units = [distributed.Unit("dies", _unit_dies_first_time,
+                              (str(tmp_path / "dies.npz"), str(tmp_path / "marker"))),
+             distributed.Unit("ok", _unit_ok, (str(tmp_path / "ok.npz"), 1))]
+    distributed.run_units(units, distributed.RayConfig(max_retries=2), tmp_path,
+                          progress=False, log=lambda s: None)
+    assert int(io.load_npz(tmp_path / "dies.npz")["value"]) == 7
+    assert (tmp_path / "marker").exists()
+
+
+def test_worker_that_keeps_dying_stops_the_run_in_one_line(local_ray, tmp_path):
+    units = [distributed.Unit("shard_00003.npz", _unit_dies_first_time,
+                              (str(tmp_path / "dies.npz"), str(tmp_path / "marker")))]
+    with pytest.raises(distributed.UnitFailedError) as info:
+        distributed.run_units(units, distributed.RayConfig(max_retries=0), tmp_path,
+                              progress=False, log=lambda s: None)
+    msg = str(info.value)
+    assert len(msg.splitlines()) == 1
+    assert "shard_00003.npz" in msg and "--ray-retries 0" in msg
+    assert not (tmp_path / "dies.npz").exists()
+
+
+def test_failing_unit_stops_the_run_in_one_line_and_keeps_finished_units(local_ray, tmp_path):
+    ok = [distributed.Unit(f"ok{i}", _unit_ok, (str(tmp_path / f"ok{i}.npz"), i))
+          for i in range(2)]
+    distributed.run_units(ok, distributed.RayConfig(), tmp_path, progress=False,
+                          log=lambda s: None)
+    bad = distributed.Unit("cell_6N_clean", _unit_fails, ("x", "the simulator diverged"))
+    with pytest.raises(distributed.UnitFailedError) as info:
+        distributed.run_units([bad, *ok], distributed.RayConfig(max_retries=3), tmp_path,
+                              progress=False, log=lambda s: None)
+    msg = str(info.value)
+    assert len(msg.splitlines()) == 1
+    assert "cell_6N_clean" in msg and "ValueError: the simulator diverged" in msg
+    for i in range(2):
+        assert int(io.load_npz(tmp_path / f"ok{i}.npz")["value"]) == i
+
+
+def test_failing_unit_through_the_command_is_exit_1_one_line(local_ray, tmp_path, capsys,
+                                                             monkeypatch):
+    from sern_jax.commands._scripts import script_module
+
+    # the units point at a function that raises (it travels by value, from this module)
+    monkeypatch.setattr(script_module("experiments", "regret"), "compute_chunk",
+                        _unit_fails_any)
+    out = tmp_path / "r"
+    assert main(TINY + ["--ray", "--out", str(out)]) == 1
+    # (Ray may forward earlier tests' worker warnings to stderr: look at sern's own line)
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and err[0].startswith("sern: error: --ray: unit softmax__seeds_"), err
+    assert "RuntimeError: injected chunk failure" in err[0]
+
+
+def _unit_fails_any(*args) -> None:
+    raise RuntimeError("injected chunk failure")
+
+
+# ----------------------------------------------------------------------- two-node cluster
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
+    """``ray start --head`` on a loopback port plus a second ``ray start --address`` node
+    (token auth disabled: loopback only), a regret sweep with SPREAD scheduling while a
+    worker process is killed, and the results equal the single-process run."""
+    ray_bin = Path(sys.executable).with_name("ray")
+    port = _free_port()
+    env = {**os.environ, "RAY_AUTH_MODE": "disabled"}  # loopback test only
+    one, par = tmp_path / "one", tmp_path / "ray"
+    flags = ["regret", "--policies", "softmax,greedy,ucb1", "-T", "2000", "-S", "96",
+             "--chunk-size", "8", "--no-figures", "--no-progress"]
+    assert main(flags + ["--out", str(one)]) == 0
+    try:
+        subprocess.run([str(ray_bin), "start", "--head", "--node-ip-address=127.0.0.1",
+                        f"--port={port}", "--num-cpus=1", "--include-dashboard=false",
+                        "--disable-usage-stats"], env=env, check=True, capture_output=True,
+                       timeout=120)
+        subprocess.run([str(ray_bin), "start", f"--address=127.0.0.1:{port}",
+                        "--node-ip-address=127.0.0.1", "--num-cpus=1",
+                        "--disable-usage-stats"], env=env, check=True, capture_output=True,
+                       timeout=120)
+        code = (
+            "import sys\n"
+            "from sern_jax import distributed\n"
+            "distributed_run = distributed.run_units\n"
+            "def spread(units, config, run_dir, **kw):\n"
+            "    import dataclasses\n"
+            "    return distributed_run(units, dataclasses.replace(config, spread=True),\n"
+            "                           run_dir, **kw)\n"
+            "distributed.run_units = spread\n"
+            "from sern_jax.commands.main import main\n"
+            f"sys.exit(main({flags + ['--ray', f'127.0.0.1:{port}', '--out', str(par)]!r}))\n")
+        driver = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        killed = _kill_one_worker(driver, timeout=240)
+        text, _ = driver.communicate(timeout=600)
+        assert driver.returncode == 0, text[-3000:]
+        assert killed, "no worker process was found to kill"
+        assert "on 2 CPUs (2 nodes)" in text, text[-3000:]
+        _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+    finally:
+        subprocess.run([str(ray_bin), "stop", "--force"], env=env, capture_output=True,
+                       timeout=120)
+
+
+def _kill_one_worker(driver: subprocess.Popen, timeout: float) -> bool:
+    """SIGKILLs one Ray worker process that is running a task (``ray::_call_unit``)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and driver.poll() is None:
+        ps = subprocess.run(["ps", "-eo", "pid,args"], capture_output=True, text=True).stdout
+        pids = [int(line.split()[0]) for line in ps.splitlines()
+                if "ray::_call_unit" in line and "IDLE" not in line]
+        if pids:
+            time.sleep(1.0)  # let it get into the computation
+            try:
+                os.kill(pids[0], signal.SIGKILL)
+                return True
+            except ProcessLookupError:
+                continue
+        time.sleep(0.2)
+    return False

@@ -1,31 +1,51 @@
-"""Online grasp learning experiments: the paper's setting, a strong one, and the ablations.
+"""Online grasp learning experiments: the paper's setting, a strong one, the ablations and
+the regret accounting, with their per-seed results kept.
 
-Each setting is a list of runs of ``online.run`` (one run directory each, resumable) on the
-shipped hard set; ``summary.json`` gathers the final-round success of every run with paired
-95 % intervals over seeds (common random numbers make the seeds paired across policies and
-across the ablation's variants, which share keys). Intervals are Student t over the seeds
-(n − 1 dof, ``sern_jax.stats``); the comparisons of a setting are reported together, so each
-row also carries its Holm-adjusted p-value and whether its sign is resolved after Holm.
+Each setting is a list of runs of ``runner.run`` (one run directory each under ``--out``,
+resumable round by round) on the shipped hard set. Every run writes its per-seed results,
+the command and the machine to ``--results`` (default ``experiments/results/<setting>/``):
+one small JSON per run label (``<label>.json``; ``<label>.part-<objects>.json`` when
+``--only`` ran a subset of the objects, which ``summarise`` joins back along the object
+axis). ``summarise`` computes everything the docs quote from those files alone: Table I
+rows (mean, population SD ``std``, sample ``sd`` and ``se`` over seeds), per-policy pooled
+figures per round, and the paired comparisons of the final round with Student-t intervals
+over seeds (n − 1 dof, ``sern_jax.stats``) and Holm's correction over the comparisons
+reported together (one family per setting, named in ``summary.json``).
 
     python -m experiments.grasp_learning paper            # 6 objects x 3 policies x 5 seeds
-    python -m experiments.grasp_learning strong           # 20 seeds, low-variance evaluation
+    python -m experiments.grasp_learning strong           # 20 seeds, 8 poses x 16 trials eval
     python -m experiments.grasp_learning alpha            # SERN alpha in {0.01, 0.05, 0.2, 1}
     python -m experiments.grasp_learning core_set         # core set none / random / DPP
     python -m experiments.grasp_learning loss             # BCE vs the printed L1 (control)
     python -m experiments.grasp_learning schedule         # constant alpha vs alpha0/ln(T^p)
+    python -m experiments.grasp_learning regret           # 3 objects, independent oracle
+    python -m experiments.grasp_learning summarise experiments/results/paper
+    python -m experiments.grasp_learning collect runs/grasp_strong experiments/results/strong
 
-Options: --objects N (first N of the hard set), --seeds S, --rounds R, --out DIR,
---backend native|mjx (trial physics; mjx for a GPU).
+``collect`` writes the per-seed file of a run that was stopped (``timeout``) from its last
+checkpoint, marked with the rounds it finished (``rounds_done``).
+
+Options: --objects N (first N of the hard set), --only a,b (those hard-set objects),
+--seeds S, --rounds R, --out DIR, --results DIR, --backend native|mjx (trial physics).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import shlex
+import sys
 import time
 from pathlib import Path
 
-SETTINGS = ("paper", "strong", "alpha", "core_set", "loss", "schedule")
+import numpy as np
+
+SETTINGS = ("paper", "strong", "alpha", "core_set", "loss", "schedule", "regret")
+FIELDS = ("lowvar_eval", "paper_eval", "explore_success", "pseudo_regret")
+AXES = "[round 0..R, object, policy, seed]; round 0 = θ0 before learning"
+
+__all__ = ["SETTINGS", "runs_of", "per_seed_doc", "save_per_seed", "load_results",
+           "summarise", "collect", "main"]
 
 
 def runs_of(setting: str, base):
@@ -46,92 +66,327 @@ def runs_of(setting: str, base):
         return [(f"loss={l}", r(base, policies=("sern",), loss=l)) for l in ("bce", "l1")]
     if setting == "schedule":
         return [("schedule", r(base, policies=("sern", "sern_log")))]
+    if setting == "regret":
+        return [("regret", r(base, regret_trials=4))]
     raise ValueError(f"unknown setting {setting!r}; choose from {SETTINGS}")
 
 
-def _paired(a, b):
-    """Mean and 95 % Student-t half-width (n − 1 dof) of the per-seed difference a - b."""
-    import numpy as np
+def _arr(a) -> list:
+    a = np.asarray(a, np.float64)
+    return np.round(np.where(np.isfinite(a), a, -1.0), 6).tolist()
 
+
+def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
+                 all_objects: list[str], config, rounds_done: int, seconds: float,
+                 command: str, theta0, extra: dict | None = None) -> dict:
+    """The per-seed record of one run: every figure per round, object, policy and seed
+    (-1 = not measured: round 0's exploration, or regret accounting off), the command, the
+    machine, θ0's digest and the trial configuration it was made with."""
+    from sern_jax import io
+    from sern_jax.grasp import sim
+
+    get = results._asdict() if hasattr(results, "_asdict") else dict(results)
+    k = rounds_done + 1
+    doc = {"label": label, "setting": setting, "objects": list(objects),
+           "all_objects": list(all_objects), "policies": list(config.policies),
+           "seeds": int(config.num_seeds), "rounds": int(config.rounds),
+           "rounds_done": int(rounds_done), "axes": AXES}
+    for f in FIELDS:
+        doc[f] = _arr(np.asarray(get[f])[:k])
+    doc.update({
+        "config": dataclasses.asdict(config),
+        "theta0_digest": theta0.fingerprint,
+        "trial_config": dataclasses.asdict(sim.TrialConfig()),
+        "command": command, "seconds": round(float(seconds), 1),
+        "machine": io.machine(devices=True),
+        "git_commit": io.run_metadata().get("git_commit"),
+    })
+    doc.update(extra or {})
+    return doc
+
+
+def save_per_seed(path, doc: dict) -> None:
+    """Writes a per-seed record as compact JSON (atomically)."""
+    import json
+
+    from sern_jax import io
+
+    io.save_text(path, json.dumps(io.to_jsonable(doc), separators=(",", ":")) + "\n")
+
+
+def _file_name(label: str, objects, all_objects) -> str:
+    stem = label.replace("=", "_")
+    if list(objects) == list(all_objects):
+        return f"{stem}.json"
+    return f"{stem}.part-{'+'.join(objects)}.json"
+
+
+def load_results(results_dir) -> dict:
+    """{label: doc} with the parts of a label joined along the object axis (in the hard
+    set's order); arrays as float64 numpy arrays with NaN where -1 was stored."""
+    from sern_jax import io
+
+    results_dir = Path(results_dir)
+    groups: dict[str, list[dict]] = {}
+    for f in sorted(results_dir.glob("*.json")):
+        if f.name == "summary.json":
+            continue
+        d = io.load_json(f)
+        if "label" not in d:
+            continue
+        groups.setdefault(d["label"], []).append(d)
+    if not groups:
+        raise ValueError(f"no per-seed results in {results_dir}")
+    out = {}
+    for label, parts in groups.items():
+        order = parts[0]["all_objects"]
+        parts.sort(key=lambda d: order.index(d["objects"][0]))
+        names = [n for d in parts for n in d["objects"]]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{label}: an object appears in two part files")
+        for key in ("policies", "seeds", "rounds_done", "theta0_digest"):
+            if len({repr(d[key]) for d in parts}) != 1:
+                raise ValueError(f"{label}: parts differ in {key}")
+        doc = dict(parts[0])
+        doc["objects"] = names
+        for f in FIELDS:
+            a = np.concatenate([np.asarray(d[f], np.float64) for d in parts], axis=1)
+            doc[f] = np.where(a < 0, np.nan, a)
+        doc["seconds"] = max(d["seconds"] for d in parts)
+        doc["parts"] = [{"objects": d["objects"], "seconds": d["seconds"],
+                         "command": d["command"], "machine": d["machine"]} for d in parts]
+        out[label] = doc
+    return out
+
+
+def _ci(x) -> dict:
     from sern_jax import stats
 
-    ci = stats.t_interval(np.asarray(a, np.float64) - np.asarray(b, np.float64), 0.95)
-    return ci.mean, ci.half
+    c = stats.t_interval(np.asarray(x, np.float64))
+    return {"mean": c.mean, "sd": c.sd, "se": c.se, "n": c.n, "half": c.half,
+            "lower": c.lower, "upper": c.upper}
+
+
+def _comparisons(names, diffs) -> list[dict]:
+    from sern_jax import stats
+
+    rows = stats.paired_differences(np.stack(diffs), names=names)
+    return [r._asdict() for r in rows]
+
+
+def summarise(results_dir, write: bool = True) -> dict:
+    """Everything the docs quote from a setting's per-seed files (see the module doc)."""
+    from sern_jax import io
+    from sern_jax.grasp import runner
+
+    results_dir = Path(results_dir)
+    docs = load_results(results_dir)
+    labels = list(docs)
+    runs, finals = {}, {}
+    for label, d in docs.items():
+        lv, pe = d["lowvar_eval"], d["paper_eval"]
+        ex, pr = d["explore_success"], d["pseudo_regret"]
+        has_lv = np.isfinite(lv).all()
+        has_pr = np.isfinite(pr[1:]).all() and pr.shape[0] > 1
+        rows = runner.table_rows(d["objects"], tuple(d["policies"]), pe,
+                                 lv if has_lv else None, pr if has_pr else None)
+        pol = {}
+        for q, p in enumerate(d["policies"]):
+            lvq, peq = lv[:, :, q, :].mean(1), pe[:, :, q, :].mean(1)  # [R+1, S] pooled
+            rec = {"lowvar_by_round": lvq.mean(1).tolist() if has_lv else None,
+                   "paper_by_round": peq.mean(1).tolist(),
+                   "explore_success": float(np.nanmean(ex[1:, :, q, :])) if len(ex) > 1
+                   else None,
+                   "final_minus_theta0_lowvar": _ci(lvq[-1] - lvq[0]) if has_lv else None,
+                   "final_lowvar": _ci(lvq[-1]) if has_lv else None}
+            if has_pr:
+                rec["regret_total"] = {o: _ci(pr[1:, i, q, :].sum(0))
+                                       for i, o in enumerate(d["objects"])}
+            pol[p] = rec
+            finals[(label, p)] = {"lowvar": lv[-1, :, q, :], "paper": pe[-1, :, q, :],
+                                  "explore": np.nanmean(ex[1:, :, q, :], axis=(0, 1)),
+                                  "regret": pr[1:, :, q, :].sum(0) if has_pr else None}
+        runs[label] = {"objects": d["objects"], "policies": d["policies"],
+                       "seeds": d["seeds"], "rounds": d["rounds"],
+                       "rounds_done": d["rounds_done"], "seconds": d["seconds"],
+                       "parts": d["parts"], "theta0_digest": d["theta0_digest"],
+                       "table": rows, "policies_pooled": pol}
+    # the comparisons reported together: SERN - each peer (one run of several policies), or
+    # each (label, policy) against the first one (an ablation)
+    keys = list(finals)
+    if len(labels) == 1 and "sern" in docs[labels[0]]["policies"] and len(keys) > 1:
+        ref = (labels[0], "sern")
+        others = [k for k in keys if k != ref]
+    else:
+        ref, others = keys[0], keys[1:]
+    comps = {}
+    if others and docs[labels[0]]["seeds"] > 1:
+        a = finals[ref]
+        objects = docs[ref[0]]["objects"]
+        names, diffs = [], []
+        for k in others:
+            b = finals[k]
+            tag = f"{ref[0]}:{ref[1]} - {k[0]}:{k[1]}"
+            if not np.isnan(a["lowvar"]).any():
+                names.append(f"{tag} | fixed-pose, pooled")
+                diffs.append(a["lowvar"].mean(0) - b["lowvar"].mean(0))
+            names.append(f"{tag} | 5-grasp, pooled")
+            diffs.append(a["paper"].mean(0) - b["paper"].mean(0))
+            if len(labels) == 1 and not np.isnan(a["lowvar"]).any():
+                for o, n in enumerate(objects):
+                    names.append(f"{tag} | fixed-pose, {n}")
+                    diffs.append(a["lowvar"][o] - b["lowvar"][o])
+        comps["final_round"] = _comparisons(names, diffs)
+        comps["explore_success"] = _comparisons(
+            [f"{ref[0]}:{ref[1]} - {k[0]}:{k[1]}" for k in others],
+            [finals[ref]["explore"] - finals[k]["explore"] for k in others])
+        if a["regret"] is not None:
+            names, diffs = [], []
+            for k in others:
+                for o, n in enumerate(objects):
+                    names.append(f"{ref[1]} - {k[1]} | {n}")
+                    diffs.append(a["regret"][o] - finals[k]["regret"][o])
+            comps["regret_total"] = _comparisons(names, diffs)
+    summary = {
+        "results_dir": results_dir.name,
+        "runs": runs,
+        "reference": list(ref),
+        "comparisons": comps,
+        "interval": ("95 % Student t over seeds (n - 1 dof) per comparison; pvalue_holm: "
+                     "Holm over the comparisons of the same list (one family each)"),
+        "metric": ("final-round greedy success per seed (fixed-pose: mean over the eval "
+                   "poses and trials; 5-grasp: the paper's evaluation); pooled = mean over "
+                   "the objects per seed"),
+    }
+    summary = io.to_jsonable(summary)
+    if write:
+        io.save_json(results_dir / "summary.json", summary)
+    return summary
+
+
+def _machine_line() -> str:
+    from sern_jax import io
+
+    m = io.machine(devices=True)
+    return (f"{m['cpu']} ({m['cores_usable']} of {m['cpu_count']} cores usable), "
+            f"jax {m.get('jax_backend')} {m.get('jax_devices')}")
+
+
+def collect(out, results) -> list[Path]:
+    """Per-seed files of the runs under ``out`` that stopped before their last round (from
+    their checkpoints); finished runs already wrote theirs."""
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, runner
+
+    written = []
+    for meta_file in sorted(Path(out).glob("*/run_meta.json")):
+        meta = io.load_json(meta_file)
+        target = Path(results) / meta["file"]
+        ckpt = meta_file.parent / "checkpoint.npz"
+        if target.exists() or not ckpt.exists():
+            continue
+        saved = io.load_npz(ckpt)
+        done = int(saved["next_round"]) - 1
+        if done < 0:
+            continue
+        theta0 = artifacts.load_theta0(meta.get("theta0_dir"))
+        config = runner.OnlineConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                        for k, v in meta["config"].items()})
+        res = {f: saved[f] for f in FIELDS}
+        doc = per_seed_doc(res, label=meta["label"], setting=meta["setting"],
+                           objects=meta["objects"], all_objects=meta["all_objects"],
+                           config=config, rounds_done=done, seconds=meta.get("seconds", 0.0),
+                           command=meta["command"], theta0=theta0,
+                           extra={"stopped_early": True, **meta.get("extra", {})})
+        save_per_seed(target, doc)
+        written.append(target)
+    return written
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("summarise", "collect"):
+        p = argparse.ArgumentParser(prog=f"experiments.grasp_learning {argv[0]}")
+        p.add_argument("dirs", nargs=1 if argv[0] == "summarise" else 2)
+        a = p.parse_args(argv[1:])
+        if argv[0] == "collect":
+            for f in collect(*a.dirs):
+                print(f"wrote {f} (from the checkpoint)")
+            return 0
+        s = summarise(a.dirs[0])
+        for name, fam in s["comparisons"].items():
+            for c in fam:
+                print(f"{name}: {c['name']}: {100 * c['mean']:+.1f} ± {100 * c['half']:.1f} "
+                      f"(95% t, n = {c['n']}; Holm p = {c['pvalue_holm']:.3f} over {len(fam)})")
+        print(f"wrote {Path(a.dirs[0]) / 'summary.json'}")
+        return 0
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("setting", choices=SETTINGS)
-    parser.add_argument("--objects", type=int, default=6)
+    parser.add_argument("--objects", type=int, default=None,
+                        help="first N objects of the hard set (default 6; regret 3)")
+    parser.add_argument("--only", default="", help="comma-separated hard-set objects")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--out", default=None)
+    parser.add_argument("--results", default=None,
+                        help="per-seed results directory (default experiments/results/SETTING)")
     parser.add_argument("--backend", choices=("native", "mjx"), default="native",
                         help="trial physics: native MuJoCo (CPU) or MJX (GPU)")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
-    if args.objects < 1:
-        raise SystemExit("--objects must be >= 1")
-
-    import numpy as np
+    num = args.objects if args.objects is not None else (3 if args.setting == "regret" else 6)
+    for name, v, lo in (("--objects", num, 1), ("--seeds", args.seeds, 1),
+                        ("--rounds", args.rounds, 1)):
+        if v < lo:
+            parser.error(f"{name} must be >= {lo}")
 
     from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, online
+    from sern_jax.grasp import artifacts, objects, runner
 
     theta0 = artifacts.load_theta0()
-    hard = artifacts.hard_set(theta0, args.objects)
-    specs = [objects.make_object(n) for n in hard["objects"]]
-    base = online.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds,
-                               backend=args.backend)
+    hard = artifacts.hard_set(theta0, num)
+    all_objects = hard["objects"]
+    chosen = all_objects
+    if args.only:
+        chosen = args.only.split(",")
+        bad = [n for n in chosen if n not in all_objects]
+        if bad:
+            parser.error(f"--only: {', '.join(bad)} not in the hard set {all_objects}")
+        chosen = [n for n in all_objects if n in chosen]
+    specs = [objects.make_object(n) for n in chosen]
+    base = runner.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds, backend=args.backend)
     out = Path(args.out or f"runs/grasp_{args.setting}")
-    summary = {"setting": args.setting, "objects": hard["objects"],
-               "meets_rule": hard["meets_rule"], "runs": {}}
-    finals = {}
+    results = Path(args.results or f"experiments/results/{args.setting}")
+    results.mkdir(parents=True, exist_ok=True)
+    command = "python -m experiments.grasp_learning " + shlex.join(argv)
+    print(f"{command}\nmachine: {_machine_line()}", flush=True)
     for label, config in runs_of(args.setting, base):
+        run_dir = out / label.replace("=", "_")
+        if args.only:
+            run_dir = run_dir.with_name(run_dir.name + "." + "+".join(chosen))
+        fname = _file_name(label, chosen, all_objects)
+        meta = {"label": label, "setting": args.setting, "objects": chosen,
+                "all_objects": all_objects, "config": dataclasses.asdict(config),
+                "command": command, "file": fname}
+        io.save_json(run_dir / "run_meta.json", meta)
         t = time.perf_counter()
-        res = online.run(config, specs, out / label.replace("=", "_"), theta0=theta0,
+        res = runner.run(config, specs, run_dir, theta0=theta0,
                          progress=not args.no_progress)
         seconds = time.perf_counter() - t
-        io.save_npz(out / label.replace("=", "_") / "results.npz",
-                    **res["results"]._asdict())
-        lv = res["results"].lowvar_eval if config.eval_poses else res["results"].paper_eval
-        for q, pol in enumerate(config.policies):
-            finals[(label, pol)] = lv[-1, :, q, :]  # [O, S]
-        summary["runs"][label] = {"table": res["table"], "timings": res["timings"],
-                                  "trial_counts": res["trial_counts"], "seconds": seconds,
-                                  "config": dataclasses.asdict(config)}
-    # paired comparisons of every (label, policy) against the first one, per object and pooled
-    keys = list(finals)
-    ref = keys[0]
-    comps = []
-    for key in keys[1:]:
-        a, b = finals[ref], finals[key]
-        row = {"a": list(ref), "b": list(key),
-               "pooled": _paired(a.mean(0), b.mean(0)),
-               "per_object": {n: _paired(a[o], b[o]) for o, n in enumerate(hard["objects"])}}
-        comps.append(row)
-    # Holm over the pooled comparisons reported together (the printed lines below)
-    if comps and len(finals[ref].T) > 1:
-        from sern_jax import stats
-
-        rows = stats.paired_differences(
-            np.stack([finals[ref].mean(0) for _ in keys[1:]]),
-            np.stack([finals[k].mean(0) for k in keys[1:]]),
-            names=[" - ".join(map(str, k)) for k in keys[1:]])
-        for c, row in zip(comps, rows):
-            c["pooled_t"] = row._asdict()
-    summary["paired_final_round"] = comps
-    summary["interval"] = ("Student t over seeds (n - 1 dof), 95 %, per comparison; "
-                           "pooled_t adds the Holm-adjusted p-value over the pooled rows")
-    summary["metric"] = "final-round greedy success (low-variance evaluation where run)"
-    summary["metadata"] = io.run_metadata()
-    io.save_json(out / "summary.json", summary)
-    for c in comps:
-        m, h = c["pooled"]
-        holm = c.get("pooled_t", {}).get("pvalue_holm", float("nan"))
-        print(f"{c['a']} - {c['b']}: {100 * m:+.1f} ± {100 * h:.1f} points (pooled, 95% t "
-              f"interval over seeds; Holm-adjusted p = {holm:.3f} over {len(comps)})")
-    print(f"wrote {out / 'summary.json'}")
+        doc = per_seed_doc(res["results"], label=label, setting=args.setting, objects=chosen,
+                           all_objects=all_objects, config=config, rounds_done=config.rounds,
+                           seconds=seconds, command=command, theta0=theta0,
+                           extra={"timings": res["timings"],
+                                  "trial_counts": res["trial_counts"]})
+        save_per_seed(results / fname, doc)
+        print(f"{label}: {seconds:.0f} s, wrote {results / fname}", flush=True)
+    if not args.only:
+        s = summarise(results)
+        for c in s["comparisons"].get("final_round", []):
+            print(f"{c['name']}: {100 * c['mean']:+.1f} ± {100 * c['half']:.1f} points (95% t "
+                  f"over {c['n']} seeds; Holm p = {c['pvalue_holm']:.3f})")
+        print(f"wrote {results / 'summary.json'}")
     return 0
 
 

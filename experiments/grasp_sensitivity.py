@@ -51,7 +51,8 @@ CELLS = tuple(f"{f}_{m}_{n}" for f, m, n in itertools.product(FORCES, FRICTIONS,
 WORLD_A = CELLS[0]  # 6N_mu0.3-0.8_clean: the world θ0 was pretrained in
 PEERS = ("greedy", "egreedy")
 
-__all__ = ["CELLS", "WORLD_A", "world", "run_cell", "summarise", "main"]
+__all__ = ["CELLS", "WORLD_A", "TRANSFER_CELLS", "world", "transfer_world", "run_cell",
+           "run_transfer_cell", "summarise", "summarise_transfer", "main"]
 
 
 def world(cell: str):
@@ -199,16 +200,174 @@ def summarise(out: str | Path, level: float = 0.95) -> dict:
     return summary
 
 
+# ----------------------------------------------------------------------------- transfer
+
+# Sim-to-sim transfer: θ0 pretrained in world A (the shipped trial, whatever its defaults
+# are) meets a world B and learns online there for 20 rounds. Each cell is one world B (or A
+# itself, the reference); every cell uses the first --objects of the shipped θ0's hard set.
+TRANSFER_CELLS = ("A", "friction_low", "heavy", "d435", "grip_6N", "mjx", "theta0_6N")
+THETA0_6N_DIR = Path(__file__).resolve().parent / "results" / "transfer" / "theta0_6N"
+TRANSFER_NOTES = {
+    "A": "world A itself: the shipped trial and θ0 (the reference)",
+    "friction_low": "object friction ~ U[0.2, 0.5] instead of the default range",
+    "heavy": "object mass scale ~ U[1.6, 2.5] instead of the default range (about twice "
+             "as heavy)",
+    "d435": "RealSense D435-like depth noise with missing pixels (contexts and evaluation)",
+    "grip_6N": "6 N per finger instead of the default force (a weaker gripper)",
+    "mjx": "MJX physics (mujoco-mjx on the GPU) instead of native MuJoCo for every trial",
+    "theta0_6N": ("world A, met by the θ0 pretrained under the previous trial (6 N per "
+                  "finger; its own core set), experiments/results/transfer/theta0_6N"),
+}
+
+
+def transfer_world(cell: str):
+    """(ContextConfig, TrialConfig, backend, θ0 directory or None) of a transfer cell."""
+    from sern_jax.grasp import context, depth, sim
+
+    if cell not in TRANSFER_CELLS:
+        raise ValueError(f"unknown transfer cell {cell!r}; choose from {TRANSFER_CELLS}")
+    ctx, trial = context.ContextConfig(), sim.TrialConfig()
+    backend, theta0_dir = "native", None
+    r = dataclasses.replace
+    if cell == "friction_low":
+        trial = r(trial, friction_range=(0.2, 0.5))
+    elif cell == "heavy":
+        trial = r(trial, mass_scale_range=(1.6, 2.5))
+    elif cell == "d435":
+        ctx = r(ctx, noise=True, camera=r(ctx.camera, noise_model="realsense"))
+    elif cell == "grip_6N":
+        ctx = r(ctx, scene=r(ctx.scene, finger_force=6.0))
+    elif cell == "mjx":
+        backend = "mjx"
+    elif cell == "theta0_6N":
+        theta0_dir = str(THETA0_6N_DIR)
+    return ctx, trial, backend, theta0_dir
+
+
+def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
+                      progress: bool = False) -> dict:
+    """Runs one transfer cell; writes ``out/<cell>.json`` (grasp_learning's per-seed format,
+    with the world) and returns it. A stopped run is turned into a file of the rounds it
+    finished by ``experiments.grasp_learning collect out/runs out``."""
+    from . import grasp_learning
+    from sern_jax import io
+    from sern_jax.grasp import artifacts, objects, runner
+
+    t0 = time.perf_counter()
+    ctx, trial, backend, theta0_dir = transfer_world(cell)
+    shipped = artifacts.load_theta0()
+    names = artifacts.hard_set(shipped, num_objects)["objects"]  # the same objects everywhere
+    theta0 = artifacts.load_theta0(theta0_dir) if theta0_dir else shipped
+    specs = [objects.make_object(n) for n in names]
+    config = runner.OnlineConfig(num_seeds=seeds, rounds=rounds, backend=backend)
+    command = (f"python -m experiments.grasp_sensitivity transfer-cell {cell} --out {out} "
+               f"--seeds {seeds} --rounds {rounds} --objects {num_objects}")
+    world_doc = {"cell": cell, "note": TRANSFER_NOTES[cell],
+                 "finger_force_N": ctx.scene.finger_force,
+                 "friction_range": list(trial.friction_range),
+                 "mass_scale_range": list(trial.mass_scale_range),
+                 "depth_noise": ctx.camera.noise_model if ctx.noise else "none",
+                 "backend": backend, "theta0_digest": theta0.fingerprint,
+                 "shipped_theta0_digest": shipped.fingerprint}
+    run_dir = out / "runs" / cell
+    io.save_json(run_dir / "run_meta.json", {
+        "label": cell, "setting": "transfer", "objects": names, "all_objects": names,
+        "config": dataclasses.asdict(config), "command": command, "file": f"{cell}.json",
+        "theta0_dir": theta0_dir, "extra": {"world": world_doc}})
+    res = runner.run(config, specs, run_dir, theta0=theta0, progress=progress,
+                     log=lambda *_: None, context_config=ctx, trial_config=trial)
+    doc = grasp_learning.per_seed_doc(
+        res["results"], label=cell, setting="transfer", objects=names, all_objects=names,
+        config=config, rounds_done=rounds, seconds=time.perf_counter() - t0, command=command,
+        theta0=theta0, extra={"world": world_doc, "timings": res["timings"],
+                              "trial_counts": res["trial_counts"]})
+    grasp_learning.save_per_seed(out / f"{cell}.json", doc)
+    return doc
+
+
+def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
+    """Per transfer cell and policy: θ0's pooled fixed-pose success in B against A (the gap,
+    paired by seed), the gain online learning makes in B by each reported round (paired
+    t-intervals over seeds), the share of the gap it recovers, the distance to the same
+    policy learning in A, and SERN − peer in B (Holm over every cell, peer and round)."""
+    from . import grasp_learning
+    from sern_jax import io
+
+    out = Path(out)
+    docs = grasp_learning.load_results(out)
+    if "A" not in docs:
+        raise ValueError(f"{out} has no world-A cell (A.json): the gap needs it")
+    a = docs["A"]
+
+    def pooled(doc, q, r):
+        return doc["lowvar_eval"][r, :, q, :].mean(0)  # [S] mean over the objects
+
+    theta_a = pooled(a, 0, 0)
+    cells, names, diffs = {}, [], []
+    for cell, d in docs.items():
+        if d["objects"] != a["objects"] or d["seeds"] != a["seeds"]:
+            raise ValueError(f"{cell}: objects or seeds differ from world A's")
+        theta_b = pooled(d, 0, 0)
+        done = d["rounds_done"]  # a stopped cell also reports its last finished round
+        rep = sorted({r for r in rounds if r <= done} | ({done} if done >= 1 else set()))
+        gap = grasp_learning._ci(theta_a - theta_b)
+        row = {"world": d.get("world"), "rounds_done": d["rounds_done"],
+               "rounds_reported": rep, "theta0_A": grasp_learning._ci(theta_a),
+               "theta0_B": grasp_learning._ci(theta_b), "gap": gap, "policies": {},
+               "seconds": d["seconds"], "machine": d["parts"][0]["machine"]}
+        for q, pol in enumerate(d["policies"]):
+            rec = {"by_round": [float(v) for v in
+                                d["lowvar_eval"][:d["rounds_done"] + 1, :, q, :]
+                                .mean((1, 2))],
+                   "gain": {}, "recovered": {}, "minus_A": {}}
+            qa = a["policies"].index(pol)
+            for r in rep:
+                g = grasp_learning._ci(pooled(d, q, r) - theta_b)
+                rec["gain"][str(r)] = g
+                rec["recovered"][str(r)] = (g["mean"] / gap["mean"] if gap["mean"] > 0.02
+                                            else None)
+                if r <= a["rounds_done"]:
+                    rec["minus_A"][str(r)] = grasp_learning._ci(pooled(d, q, r)
+                                                                - pooled(a, qa, r))
+            row["policies"][pol] = rec
+        if "sern" in d["policies"]:
+            s = d["policies"].index("sern")
+            for q, pol in enumerate(d["policies"]):
+                if q != s:
+                    for r in rep[1:] or rep:
+                        names.append(f"{cell}: sern - {pol}, round {r}")
+                        diffs.append(pooled(d, s, r) - pooled(d, q, r))
+        cells[cell] = row
+    comps = grasp_learning._comparisons(names, diffs) if names else []
+    summary = io.to_jsonable({
+        "objects": a["objects"], "seeds": a["seeds"], "cells": cells,
+        "cells_missing": [c for c in TRANSFER_CELLS if c not in docs],
+        "comparisons": comps,
+        "metric": "fixed-pose greedy success, mean over the objects, per seed",
+        "note": ("gap = θ0's success in A minus in B per seed (for theta0_6N: the shipped θ0 "
+                 "minus the 6 N θ0, both in A); gain[r] = success at round r minus θ0's in B "
+                 "per seed; recovered[r] = mean gain / mean gap (only where the gap exceeds "
+                 "2 points); minus_A[r] = success in B minus the same policy's in A at round "
+                 "r; intervals 95 % Student t over seeds; comparisons: Holm over all of "
+                 "them"),
+    })
+    io.save_json(out / "summary.json", summary)
+    return summary
+
+
 def t_dict(ci) -> dict:
     return {"mean": round(ci.mean, 6), "half": round(ci.half, 6), "n": ci.n}
 
 
-def _run_grid(args) -> int:
+def _run_grid(args, transfer: bool = False) -> int:
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cells = args.cells.split(",") if args.cells else list(CELLS)
+    names = TRANSFER_CELLS if transfer else CELLS
+    cells = args.cells.split(",") if args.cells else list(names)
     for c in cells:
-        world(c)  # refuses an unknown cell before any work
+        if c not in names:  # refuses an unknown cell before any work
+            raise SystemExit(f"--cells: unknown cell {c!r}; choose from {', '.join(names)}")
+    sub = "transfer-cell" if transfer else "cell"
+    out.mkdir(parents=True, exist_ok=True)
     todo = [c for c in cells if not (out / f"{c}.json").exists()]
     cores = sorted(os.sched_getaffinity(0))
     workers = max(1, min(args.workers, len(todo) or 1))
@@ -223,7 +382,7 @@ def _run_grid(args) -> int:
             slot = slots.pop(0)
             cell = todo.pop(0)
             mine = cores[slot * share:(slot + 1) * share] or cores
-            cmd = [sys.executable, "-m", "experiments.grasp_sensitivity", "cell", cell,
+            cmd = [sys.executable, "-m", "experiments.grasp_sensitivity", sub, cell,
                    "--out", str(out), "--seeds", str(args.seeds), "--rounds",
                    str(args.rounds), "--objects", str(args.objects)]
             proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
@@ -241,10 +400,25 @@ def _run_grid(args) -> int:
         if args.deadline and time.perf_counter() - t0 > args.deadline:
             for cell, (proc, _) in running.items():
                 proc.kill()
-                print(f"stopped {cell} at the deadline: not run", flush=True)
+                print(f"stopped {cell} at the deadline" + ("" if transfer else ": not run"),
+                      flush=True)
             running.clear()
             todo.clear()
     log.close()
+    if transfer:
+        from . import grasp_learning
+
+        for f in grasp_learning.collect(out / "runs", out):
+            print(f"wrote {f} from its last checkpoint (stopped early)", flush=True)
+        summary = summarise_transfer(out)
+        for cell, c in summary["cells"].items():
+            last = c["rounds_reported"][-1] if c["rounds_reported"] else None
+            parts = [f"{p} {100 * v['gain'][str(last)]['mean']:+.1f}" for p, v in
+                     c["policies"].items() if last]
+            print(f"{cell:>12s}: θ0 {100 * c['theta0_B']['mean']:.1f} %, gap "
+                  f"{100 * c['gap']['mean']:+.1f}; gain at round {last}: " + ", ".join(parts))
+        print(f"wrote {out / 'summary.json'} ({time.perf_counter() - t0:.0f} s)")
+        return 0
     summary = summarise(out)
     for cell, c in summary["cells"].items():
         parts = [f"{k} {100 * v['mean']:+.1f} ± {100 * v['half']:.1f}"
@@ -273,7 +447,28 @@ def main(argv=None) -> int:
                        help="seconds after which running cells are stopped (0 = none)")
     p_sum = sub.add_parser("summarise", help="summary.json from saved cells")
     p_sum.add_argument("out")
+    p_tr = sub.add_parser("transfer", help="run the transfer cells in worker processes")
+    p_tcell = sub.add_parser("transfer-cell", help="run one transfer cell in this process")
+    p_tcell.add_argument("cell", choices=TRANSFER_CELLS)
+    for p in (p_tr, p_tcell):
+        p.add_argument("--out", default="runs/transfer")
+        p.add_argument("--seeds", type=int, default=5)
+        p.add_argument("--rounds", type=int, default=20)
+        p.add_argument("--objects", type=int, default=3)
+    p_tr.add_argument("--cells", default="", help="comma-separated subset (default: all)")
+    p_tr.add_argument("--workers", type=int, default=7)
+    p_tr.add_argument("--deadline", type=float, default=0.0,
+                      help="seconds after which running cells are stopped and their "
+                           "finished rounds collected (0 = none)")
+    p_tsum = sub.add_parser("transfer-summarise", help="summary.json from saved cells")
+    p_tsum.add_argument("out")
     args = parser.parse_args(argv)
+    if args.what == "transfer-summarise":
+        s = summarise_transfer(args.out)
+        print(json.dumps({"cells_missing": s["cells_missing"],
+                          "resolved": [c["name"] for c in s["comparisons"] if c["resolved"]]},
+                         indent=1))
+        return 0
     if args.what == "summarise":
         s = summarise(args.out)
         print(json.dumps({"resolved": s["resolved"], "sign_of_mean": s["sign_of_mean"],
@@ -286,9 +481,14 @@ def main(argv=None) -> int:
         doc = run_cell(args.cell, Path(args.out), args.seeds, args.rounds, args.objects)
         print(f"{args.cell}: {doc['seconds']:.0f} s")
         return 0
+    if args.what == "transfer-cell":
+        doc = run_transfer_cell(args.cell, Path(args.out), args.seeds, args.rounds,
+                                args.objects)
+        print(f"{args.cell}: {doc['seconds']:.0f} s")
+        return 0
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-    return _run_grid(args)
+    return _run_grid(args, transfer=args.what == "transfer")
 
 
 if __name__ == "__main__":

@@ -13,10 +13,13 @@ numbers: differences are paired by seed).
 
 Fair tuning (``tune``): each learner's main knob takes the same number of settings
 (:data:`GRID`, three each, the paper's/default value among them) on objects that are not among
-the six reported (:data:`TUNING_OBJECTS`: the three non-hard named objects with the lowest θ0
-greedy success in the shipped screen); the setting with the highest mean low-variance greedy
-success over rounds 1..R (mean over tuning objects and seeds) is kept. ``greedy`` and
-``normalized`` have no knob (one setting).
+the six reported (:func:`tuning_objects`: the next three objects of the shipped screen's
+hard-set order, i.e. the non-reported objects whose fresh-trial best candidate succeeds at
+least 80 % with the lowest θ0 greedy success; read from the screen of the θ0 in use, so a new
+trial's screen picks its own); the setting with the highest mean low-variance greedy success
+over rounds 1..R (mean over tuning objects and seeds; ties: the first setting listed) is kept.
+``greedy`` and ``normalized`` have no knob (one setting). Every tuning score, and the
+per-seed figures behind them (``tune_per_seed.npz``), are saved.
 
 Per learner (``summarize``, from the saved per-seed results only): successes during
 exploration (what a robot owner pays for), final low-variance greedy success, per-round
@@ -24,10 +27,17 @@ pseudo-regret (when ``--regret-trials`` > 0); paired differences against SERN ov
 (each seed's value is the mean over the six objects), Student-t intervals (n − 1 dof) and
 Holm's correction over the comparisons of each metric (``sern_jax.stats``).
 
-Files under ``--out``: ``tune/setting<i>/`` and ``run/`` (the runner's resumable run
-directories), ``tuned.json`` (every tuning score and the choice), ``per_seed.npz`` (the
-reported runs' per-seed figures, [R + 1, O, Q, S]), ``meta.json``, ``summary.json``,
-``table.md``; ``figures/make_grasp_baselines_fig.py`` draws from them.
+Resuming. Every run directory's checkpoint holds the results and rewards only (kilobytes;
+the runner replays the learners' updates on resume), so a comparison stopped by a device
+command's time limit resumes from the files it left: rerun the same command with the same
+``--out`` (``tune`` skips settings whose run finished; ``run`` resumes its run directory).
+``collect`` writes ``per_seed.npz`` and the summary from whatever rounds have finished.
+
+Files under ``--out``: ``tune/setting<i>/`` and ``run/`` (the runner's run directories, each
+a ``checkpoint.npz``), ``tuned.json`` (every tuning score and the choice),
+``tune_per_seed.npz``, ``per_seed.npz`` (the reported run's per-seed figures,
+[R + 1, O, Q, S]), ``meta.json``, ``summary.json``, ``table.md``;
+``figures/make_grasp_baselines_fig.py`` draws from them.
 """
 
 from __future__ import annotations
@@ -41,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-TUNING_OBJECTS = ("detergent_bottle", "round_stapler", "bracket")
+NUM_TUNING_OBJECTS = 3
 REFERENCE = "sern"
 # learner -> (hyperparameter field, three settings); the default / paper value is among them
 GRID = {
@@ -81,6 +91,23 @@ def _specs(names):
     return [objects_lib.make_object(n) for n in names]
 
 
+def tuning_objects(theta0, num: int = NUM_TUNING_OBJECTS) -> list[str]:
+    """The ``num`` objects tuning runs on: the next ``num`` of the shipped screen's hard-set
+    order after the six reported (``artifacts.hard_set``: objects whose best candidate
+    succeeds >= 80 % on fresh trials, by θ0 greedy success), never a reported object; if
+    too few qualify, the remaining screened objects of lowest θ0 greedy success."""
+    from sern_jax.grasp import artifacts
+
+    reported = artifacts.hard_set(theta0)["objects"]
+    ordered = artifacts.hard_set(theta0, len(reported) + num)["objects"]
+    chosen = [n for n in ordered if n not in reported][:num]
+    rest = sorted((r for r in theta0.screen["objects"]
+                   if r["object"] not in reported and r["object"] not in chosen),
+                  key=lambda r: (r["greedy_success"], r["object"]))
+    chosen += [r["object"] for r in rest][:num - len(chosen)]
+    return chosen
+
+
 def hard_specs():
     """The shipped hard set's specs (the six reported objects) and θ0."""
     from sern_jax.grasp import artifacts
@@ -100,35 +127,52 @@ def _run(config, specs, out_dir, theta0, progress):
 # ----------------------------------------------------------------------------- tune
 
 
-def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool) -> dict:
-    """Runs the GRID's settings on TUNING_OBJECTS; writes and returns ``tuned.json``."""
+def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
+         num_objects: int = NUM_TUNING_OBJECTS, explore: int = 20,
+         names: tuple[str, ...] | None = None) -> dict:
+    """Runs the GRID's settings on :func:`tuning_objects`; writes and returns ``tuned.json``
+    (and ``tune_per_seed.npz``: low-variance success [setting, R + 1, O, Q, S]). A setting
+    whose run directory holds a finished run is read back, not rerun (resume)."""
+    from sern_jax import io
     from sern_jax.grasp import artifacts
 
     theta0 = artifacts.load_theta0()
+    objects = tuning_objects(theta0, num_objects)
     hard = set(artifacts.hard_set(theta0)["objects"])
-    if hard & set(TUNING_OBJECTS):
-        raise SystemExit(f"tuning objects {sorted(hard & set(TUNING_OBJECTS))} are reported")
-    specs = _specs(TUNING_OBJECTS)
-    knobbed = tuple(n for n in learners() if n in GRID)
+    if hard & set(objects):
+        raise SystemExit(f"tuning objects {sorted(hard & set(objects))} are reported")
+    specs = _specs(objects)
+    knobbed = tuple(n for n in (names or learners()) if n in GRID)
     scores = {n: [] for n in knobbed}
-    wall = []
+    wall, lowvars, explores = [], [], []
     for i in range(3):
         values = {GRID[n][0]: GRID[n][1][i] for n in knobbed}
         config = online_config(knobbed, values, num_seeds=seeds, rounds=rounds,
-                               backend=backend)
+                               explore=explore, backend=backend)
         res, secs = _run(config, specs, out / "tune" / f"setting{i}", theta0, progress)
         wall.append(secs)
         lowvar = np.asarray(res["results"].lowvar_eval)  # [R + 1, O, Q, S]
+        lowvars.append(lowvar)
+        explores.append(np.asarray(res["results"].explore_success))
         for q, n in enumerate(config.policies):
             scores[n].append(float(lowvar[1:, :, q, :].mean()))
     choice = {n: GRID[n][1][int(np.argmax(scores[n]))] for n in knobbed}
-    doc = {"objects": list(TUNING_OBJECTS), "seeds": seeds, "rounds": rounds,
+    np.savez_compressed(out / "tune_per_seed.npz",
+                        lowvar_eval=np.stack(lowvars).astype(np.float32),
+                        explore_success=np.stack(explores).astype(np.float32))
+    doc = {"objects": objects, "seeds": seeds, "rounds": rounds, "explore": explore,
+           "learners": list(knobbed),
+           "rule": ("tuning objects: the next objects of the shipped screen's hard-set "
+                    "order after the six reported (artifacts.hard_set), none reported"),
            "criterion": ("mean low-variance greedy success over rounds 1..R, tuning "
-                         "objects and seeds"),
+                         "objects and seeds; ties: the first setting listed"),
            "grid": {n: {"field": GRID[n][0], "settings": list(GRID[n][1]),
                         "scores": scores[n], "chosen": choice[n]} for n in knobbed},
-           "no_knob": list(NO_KNOB), "wall_s": wall}
-    (out / "tuned.json").write_text(json.dumps(doc, indent=1))
+           "no_knob": list(NO_KNOB), "wall_s": wall,
+           "axes": "tune_per_seed.npz: [setting, R + 1, O, Q (learners), S]",
+           "machine": io.machine(),
+           "command": "python -m experiments.grasp_baselines tune " + " ".join(sys.argv[2:])}
+    (out / "tuned.json").write_text(json.dumps(doc, indent=1, default=str))
     return doc
 
 
@@ -146,44 +190,22 @@ def tuned_values(out: Path, untuned: bool) -> dict:
 # ----------------------------------------------------------------------------- run
 
 
-RESULTS_ONLY = "results_partial.npz"
-
-
-def _results_only_saves() -> None:
-    """Makes the runner save, after each round, only the per-seed results and the round
-    (``RESULTS_ONLY`` beside the checkpoint) instead of its resumable checkpoint. The
-    checkpoint of 11 learners x 120 copies (buffers, Adam states, ensembles) is ~0.8 GB,
-    compressed and hashed after every round: minutes a short device lease cannot spare.
-    Such a run cannot resume; its finished rounds are still collected."""
-    from sern_jax.grasp import runner as runner_lib
-
-    def save(path, fingerprint, states, horizon, results, next_round):
-        del states, horizon
-        np.savez(Path(path).with_name(RESULTS_ONLY), fingerprint=np.asarray(fingerprint),
-                 next_round=np.asarray(next_round),
-                 **{f: np.asarray(getattr(results, f)) for f in results._fields})
-
-    runner_lib._save = save
-
-
 def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
         num_objects: int | None, progress: bool, explore: int = 20,
-        run_dir: Path | None = None, checkpoints: bool = True) -> None:
+        run_dir: Path | None = None, regret_grasps: int = 0,
+        names: tuple[str, ...] | None = None) -> None:
     """The reported comparison. ``meta.json`` is written first and ``per_seed.npz`` from the
     runner's checkpoint, so a run stopped after some rounds still leaves its finished rounds
-    (``collect``); ``run_dir`` (default ``out/run``) holds the runner's resumable run
-    directory, whose checkpoint (the learners' states) is large; ``checkpoints=False``
-    saves the results alone (:func:`_results_only_saves`)."""
+    (``collect``); ``run_dir`` (default ``out/run``) is the runner's run directory (a
+    checkpoint of kilobytes): the same command resumes it."""
     from sern_jax import io
-
-    if not checkpoints:
-        _results_only_saves()
 
     specs, theta0 = hard_specs()
     specs = specs[:num_objects] if num_objects else specs
     values = tuned_values(out, untuned)
-    config = online_config(learners(), values, num_seeds=seeds, rounds=rounds,
-                           explore=explore, regret_trials=regret_trials, backend=backend)
+    config = online_config(names or learners(), values, num_seeds=seeds, rounds=rounds,
+                           explore=explore, regret_trials=regret_trials,
+                           regret_grasps=regret_grasps, backend=backend)
     run_dir = run_dir or out / "run"
     out.mkdir(parents=True, exist_ok=True)
     meta = io.run_metadata(
@@ -194,13 +216,14 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
                          for n in config.policies},
         rounds=rounds, explore=config.explore, evaluate=config.evaluate,
         eval_poses=config.eval_poses, eval_trials=config.eval_trials,
-        regret_trials=regret_trials, backend=backend, run_dir=str(run_dir),
-        checkpoints=checkpoints,
+        regret_trials=regret_trials, regret_grasps=config.regret_grasps, backend=backend,
+        run_dir=str(run_dir), checkpoints=True,
         command="python -m experiments.grasp_baselines run " + " ".join(sys.argv[2:]),
         axes="[R + 1, O, Q, S]: round (0 = θ0), object, learner, seed")
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     res, secs = _run(config, specs, run_dir, theta0, progress)
-    meta.update(wall_s=secs, timings=res["timings"], trial_counts=res["trial_counts"])
+    meta.update(wall_s=secs, timings=res["timings"], trial_counts=res["trial_counts"],
+                fingerprint=res["fingerprint"])
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     collect(out)
 
@@ -212,10 +235,9 @@ def collect(out: Path) -> None:
 
     meta = json.loads((out / "meta.json").read_text())
     run_dir = Path(meta["run_dir"])
-    if meta.get("checkpoints", True):
-        saved = io.load_npz(run_dir / "checkpoint.npz")
-    else:
-        saved = dict(np.load(run_dir / RESULTS_ONLY))
+    if not (run_dir / "checkpoint.npz").exists():  # made elsewhere (a device's $OUT)
+        run_dir = out / "run"
+    saved = io.load_npz(run_dir / "checkpoint.npz")
     done = int(saved["next_round"])  # rounds 0 .. done - 1 are finished
     if done < 2:
         raise SystemExit(f"only {done} round(s) finished: nothing to compare")
@@ -241,7 +263,8 @@ def per_seed_metrics(per_seed: dict, meta: dict) -> dict:
     }
     regret = per_seed["pseudo_regret"][1:]
     if meta.get("regret_trials") and np.isfinite(regret).all():
-        out["pseudo_regret_per_round"] = regret.mean(axis=(0, 1))  # per round, 20 grasps
+        # expected successes lost per round of E exploration grasps (mean over rounds)
+        out["pseudo_regret_per_round"] = regret.mean(axis=(0, 1))
     return out
 
 
@@ -272,9 +295,22 @@ def summarize(out: Path) -> dict:
             "paired": [d._asdict() for d in diffs],
         }
     if "pseudo_regret_per_round" in metrics:
-        pr = per_seed["pseudo_regret"][1:].mean(axis=1)  # [R, Q, S]
-        summary["pseudo_regret_by_round"] = {n: [float(v) for v in pr[:, q].mean(-1)]
-                                             for q, n in enumerate(names)}
+        pr = per_seed["pseudo_regret"][1:].mean(axis=1)  # [R, Q, S], mean over objects
+        by_round = {}
+        for q, n in enumerate(names):
+            ci = stats.t_interval(pr[:, q], 0.95, axis=1)
+            by_round[n] = {k: [float(v) for v in getattr(ci, k)]
+                           for k in ("mean", "se", "lower", "upper")}
+        summary["pseudo_regret_by_round"] = by_round
+        summary["pseudo_regret_oracle"] = {
+            "regret_trials": meta.get("regret_trials"),
+            "regret_grasps": meta.get("regret_grasps") or meta.get("explore"),
+            "explore": meta.get("explore"),
+            "what": ("expected successes lost to the oracle's best candidate (argmax of "
+                     "regret_trials trials per candidate, valued on as many independent "
+                     "ones) per round of explore grasps, under the learner's own "
+                     "distribution; estimated on the first regret_grasps grasps of each "
+                     "phase and scaled by explore / regret_grasps")}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     (out / "table.md").write_text(table_md(summary))
     print(table_md(summary))
@@ -305,6 +341,23 @@ def table_md(summary: dict) -> str:
                         f"{'yes' if p['resolved'] else 'no'}"
                         f"{' (sd 0: every seed the same)' if p['sd'] == 0 else ''} |")
             lines.append(row)
+        lines.append("")
+    if "pseudo_regret_by_round" in summary:
+        by_round = summary["pseudo_regret_by_round"]
+        num_r = len(next(iter(by_round.values()))["mean"])
+        orc = summary.get("pseudo_regret_oracle", {})
+        lines += ["### pseudo-regret per round", "",
+                  f"Expected successes lost per round of {orc.get('explore')} exploration "
+                  f"grasps (oracle: {orc.get('regret_trials')} + {orc.get('regret_trials')} "
+                  f"independent trials per candidate, on {orc.get('regret_grasps')} grasps "
+                  "per phase, scaled); mean [95 % t interval] over seeds.", "",
+                  "| learner | " + " | ".join(f"round {r + 1}" for r in range(num_r)) + " |",
+                  "|---|" + "---|" * num_r]
+        for n in names:
+            b = by_round[n]
+            lines.append(f"| {n} | " + " | ".join(
+                f"{b['mean'][r]:.2f} [{b['lower'][r]:.2f}, {b['upper'][r]:.2f}]"
+                for r in range(num_r)) + " |")
         lines.append("")
     return "\n".join(lines)
 
@@ -401,11 +454,15 @@ def main(argv=None) -> None:
     p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize"))
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
     p.add_argument("--seeds", type=int, default=20)
-    p.add_argument("--tune-seeds", type=int, default=5)
+    p.add_argument("--tune-seeds", type=int, default=4)
+    p.add_argument("--tune-rounds", type=int, default=3, help="tune: rounds per setting")
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--explore", type=int, default=20, help="grasps per exploration phase")
     p.add_argument("--objects", type=int, default=None, help="first N of the hard set")
-    p.add_argument("--regret-trials", type=int, default=0)
+    p.add_argument("--regret-trials", type=int, default=0,
+                   help="run: oracle trials per candidate (x2: selection and valuation)")
+    p.add_argument("--regret-grasps", type=int, default=0,
+                   help="run: oracle on the first G grasps of each phase (0: all)")
     p.add_argument("--backend", choices=("native", "mjx"), default="native")
     p.add_argument("--untuned", action="store_true", help="run with every default")
     p.add_argument("--copies", default="6,5", help="bench: O,S parameter copies")
@@ -415,16 +472,30 @@ def main(argv=None) -> None:
     p.add_argument("--run-dir", type=Path, default=None,
                    help="run: the runner's run directory (default OUT/run; large)")
     p.add_argument("--results-only", action="store_true",
-                   help="run: save per-round results, not the ~0.8 GB resumable checkpoint")
+                   help="(kept for old commands: every checkpoint is now results only)")
+    p.add_argument("--policies", default=None,
+                   help="run: comma-separated learners (default: every registered one)")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
     for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
-                    ("--rounds", a.rounds), ("--repeats", a.repeats),
-                    ("--explore", a.explore)):
+                    ("--rounds", a.rounds), ("--tune-rounds", a.tune_rounds),
+                    ("--repeats", a.repeats), ("--explore", a.explore)):
         if v < (2 if flag in ("--seeds", "--tune-seeds") else 1):
             p.error(f"{flag} must be >= {2 if 'seeds' in flag else 1}, got {v}")
     if a.regret_trials < 0:
         p.error(f"--regret-trials must be >= 0, got {a.regret_trials}")
+    if not 0 <= a.regret_grasps <= a.explore:
+        p.error(f"--regret-grasps must be in [0, --explore], got {a.regret_grasps}")
+    names = None
+    if a.policies:
+        from sern_jax.learners import registry
+
+        try:
+            names = registry.check_names(a.policies.split(","), "--policies")
+        except ValueError as e:
+            p.error(str(e))
+        if REFERENCE not in names:
+            p.error(f"--policies must include the reference {REFERENCE!r}")
     if a.what == "bench":
         o, s = (int(v) for v in a.copies.split(","))
         res = bench((o, s), a.repeats, a.learners.split(",") if a.learners else None)
@@ -435,11 +506,13 @@ def main(argv=None) -> None:
             a.json_out.write_text(text)
     elif a.what == "tune":
         a.out.mkdir(parents=True, exist_ok=True)
-        print(json.dumps(tune(a.out, a.tune_seeds, a.rounds, a.backend, not a.no_progress),
+        print(json.dumps(tune(a.out, a.tune_seeds, a.tune_rounds, a.backend,
+                              not a.no_progress, explore=a.explore,
+                              num_objects=a.objects or NUM_TUNING_OBJECTS, names=names),
                          indent=1))
     elif a.what == "run":
         run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
-            not a.no_progress, a.explore, a.run_dir, not a.results_only)
+            not a.no_progress, a.explore, a.run_dir, a.regret_grasps, names)
     elif a.what == "collect":
         collect(a.out)
     else:

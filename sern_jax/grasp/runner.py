@@ -72,7 +72,8 @@ __all__ = [
 ]
 
 MJX_BATCH = 2048  # MJX trials per compiled call: one compile per object on a GPU
-CHECKPOINT_VERSION = 4  # bump when the checkpoint's contents change (4: learner states)
+CHECKPOINT_VERSION = 5  # bump when the checkpoint's contents change (5: results + rewards,
+#                        learner states rebuilt by replaying the updates on resume)
 EXPLORE_CONTEXT, EXPLORE_TRIAL, POLICY_UNIFORM, FIT = 0, 1, 2, 3
 EVAL_CONTEXT, EVAL_TRIAL, EVAL_UNIFORM, LOWVAR_CONTEXT, LOWVAR_TRIAL = 4, 5, 6, 7, 8
 ORACLE_TRIAL = 9  # the oracle's selection trials (its argmax)
@@ -111,6 +112,10 @@ class OnlineConfig:
         max and its value from the same trials would add the upward bias of a maximum of
         noisy frequencies). Costly: 2 x 64 x M trials per exploration grasp, shared by the
         learners. 0 = off.
+      regret_grasps: g > 0 runs the oracle on the first g exploration grasps of each phase
+        only and records (explore / g) x their pseudo-regret: an unbiased estimate of the
+        phase's (its grasps are i.i.d.: fresh poses, one learner state per phase) at g /
+        explore of the oracle's cost. 0 = every grasp.
       seed: root seed.
       backend: physics backend for trials.
     """
@@ -132,6 +137,7 @@ class OnlineConfig:
     eval_poses: int = 4
     eval_trials: int = 8
     regret_trials: int = 0
+    regret_grasps: int = 0
     seed: int = 0
     backend: str = "native"
     hyper: tuple = ()
@@ -153,10 +159,13 @@ class OnlineConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
-        for name in ("eval_poses", "eval_trials", "regret_trials"):
+        for name in ("eval_poses", "eval_trials", "regret_trials", "regret_grasps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        if self.regret_grasps > self.explore:
+            raise ValueError(f"regret_grasps must be <= explore ({self.explore}), got "
+                             f"{self.regret_grasps}")
         if self.num_seeds * self.rounds * self.explore > 10_000_000:
             raise ValueError("num_seeds x rounds x explore exceeds 10M grasps per object")
         # every registered learner's config is built, so a bad value of any flag is refused
@@ -197,6 +206,8 @@ class OnlineConfig:
         d = dataclasses.asdict(self)
         if not d["hyper"]:
             del d["hyper"]  # runs from before the field keep their fingerprint
+        if not d["regret_grasps"]:
+            del d["regret_grasps"]
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -530,8 +541,12 @@ def run(
     being developed, a test's toy); by default each name in ``config.policies`` is built
     from the registry over θ0's network.
 
-    The state after each finished round is saved to ``out_dir/checkpoint.npz``: rerunning
-    the same command resumes after the last finished round and gives the same table.
+    After each finished round ``out_dir/checkpoint.npz`` saves the results and every
+    exploration grasp's reward (kilobytes: no learner state). Rerunning the same command
+    resumes after the last finished round: the learners' states are rebuilt by replaying
+    init and each finished round's update on the same inputs (the exploration contexts
+    recomputed from their keys, the saved choices and rewards), which is the computation
+    of the uninterrupted run, so it gives the same results (tests/grasp/test_runner.py).
     """
     out_dir = Path(out_dir)
     names = [s.name for s in specs]
@@ -569,6 +584,7 @@ def run(
     shape = (num_r + 1, num_o, num_q, num_s)
     results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan),
                            np.full(shape + (num_e,), -1, np.int32), np.full(shape, np.nan))
+    rewards = np.zeros((num_r + 1, num_o, num_s, num_q, num_e), np.int8)  # per grasp
     timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate")}
     if config.regret_trials:
         timings["oracle"] = 0.0
@@ -581,9 +597,8 @@ def run(
         if str(saved.get("fingerprint", "")) != fingerprint:
             raise ValueError(f"{out_dir} holds a different learning run; choose another --out "
                              "or delete it")
-        states = [_state_from_arrays(saved, f"L{q}_", st, config.horizon)
-                  for q, st in enumerate(states)]
         results = RoundResults(*(saved[f] for f in RoundResults._fields))
+        rewards = np.asarray(saved["explore_reward"], np.int8)
         start_round = int(saved["next_round"])
         log(f"resuming {out_dir} at round {start_round}")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -641,18 +656,46 @@ def run(
 
     if start_round == 0:
         evaluate(0, states)
-        _save(ckpt, fingerprint, states, config.horizon, results, 1)
+        _save(ckpt, fingerprint, results, rewards, 1)
         start_round = 1
         bar.update(1)
 
-    for r in range(start_round, num_r + 1):
-        # 1. exploration
+    def explore_contexts(r):
         t = time.perf_counter()
-        poses, depth, cands = _stack_contexts(
+        out = _stack_contexts(
             [[_contexts(_stream(keys_os[o][s], EXPLORE_CONTEXT, r), specs[o], num_e,
                         models[o], context_config) for s in range(num_s)]
              for o in range(num_o)])  # poses [O, S, E, 7]
         timings["contexts"] += time.perf_counter() - t
+        return out
+
+    def update_all(r, crops, action, success):
+        """Every learner's update on the phase's (crop, action, reward): action and success
+        [O, S, Q, E]."""
+        t = time.perf_counter()
+        image = np.asarray(crops.image)  # [O, S, E, K, c, c]
+        cdepth = np.asarray(crops.depth)  # [O, S, E, K]
+        o_i, s_i, e_i = np.indices(action[:, :, 0].shape)
+        fit_keys = _stream_keys(keys_os, FIT, r)
+        for q, lrn in enumerate(chosen):
+            idx = np.maximum(action[:, :, q], 0)
+            batch = lbase.Batch((image[o_i, s_i, e_i, idx], cdepth[o_i, s_i, e_i, idx]),
+                                action[:, :, q], success[:, :, q].astype(np.float32))
+            states[q] = _batched_update(lrn.update)(fit_keys, states[q], batch)
+        jax.block_until_ready(states)
+        timings["update"] += time.perf_counter() - t
+
+    if start_round > 1:  # replay: the learners' states after round start_round - 1
+        t = time.perf_counter()
+        for r in range(1, start_round):
+            _, depth, cands = explore_contexts(r)
+            update_all(r, crops_fn(depth, cands),
+                       results.explore_action[r].transpose(0, 2, 1, 3), rewards[r] > 0)
+        log(f"replayed rounds 1..{start_round - 1} in {time.perf_counter() - t:.1f} s")
+
+    for r in range(start_round, num_r + 1):
+        # 1. exploration
+        poses, depth, cands = explore_contexts(r)
         t = time.perf_counter()
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (num_e,))))(
             _stream_keys(keys_os, POLICY_UNIFORM, r)))
@@ -674,34 +717,26 @@ def run(
         timings["trials"] += time.perf_counter() - t
         results.explore_success[r] = success.mean(-1).transpose(0, 2, 1)
         results.explore_action[r] = action.transpose(0, 2, 1, 3)
+        rewards[r] = success
         if config.regret_trials:
             t = time.perf_counter()
+            g = config.regret_grasps or num_e  # the oracle's grasps: the phase's first g
+            sub = jax.tree.map(lambda x: np.asarray(x)[:, :, :g], cands)
             select, value = (
-                _oracle(simulators, cands, poses, config.regret_trials,
+                _oracle(simulators, sub, poses[:, :, :g], config.regret_trials,
                         [[_stream(k, stream, r) for k in row] for row in keys_os],
-                        trial_counts)[:, :, None]  # [O, S, 1, E, K]
+                        trial_counts)[:, :, None]  # [O, S, 1, g, K]
                 for stream in (ORACLE_TRIAL, ORACLE_VALUE))
-            valid = np.asarray(cands.valid, bool)[:, :, None]
-            regret = stats.oracle_regret(select, value, probs, valid)  # [O, S, Q, E]
+            valid = np.asarray(sub.valid, bool)[:, :, None]
+            regret = stats.oracle_regret(select, value, probs[..., :g, :], valid)  # [O,S,Q,g]
             regret = np.where(valid.any(-1), regret, 0.0)  # nothing valid: nothing lost
-            results.pseudo_regret[r] = regret.sum(-1).transpose(0, 2, 1)
+            results.pseudo_regret[r] = (num_e / g) * regret.sum(-1).transpose(0, 2, 1)
             timings["oracle"] += time.perf_counter() - t
         # 2. update on the phase's (crop, action, reward)
-        t = time.perf_counter()
-        image = np.asarray(crops.image)  # [O, S, E, K, c, c]
-        cdepth = np.asarray(crops.depth)  # [O, S, E, K]
-        o_i, s_i, e_i = np.indices(action[:, :, 0].shape)
-        fit_keys = _stream_keys(keys_os, FIT, r)
-        for q, lrn in enumerate(chosen):
-            idx = np.maximum(action[:, :, q], 0)
-            batch = lbase.Batch((image[o_i, s_i, e_i, idx], cdepth[o_i, s_i, e_i, idx]),
-                                action[:, :, q], success[:, :, q].astype(np.float32))
-            states[q] = _batched_update(lrn.update)(fit_keys, states[q], batch)
-        jax.block_until_ready(states)
-        timings["update"] += time.perf_counter() - t
+        update_all(r, crops, action, success)
         # 3. evaluation
         evaluate(r, states)
-        _save(ckpt, fingerprint, states, config.horizon, results, r + 1)
+        _save(ckpt, fingerprint, results, rewards, r + 1)
         bar.update(1)
     bar.close()
     rows = table_rows(names, config.policies, results.paper_eval,
@@ -797,10 +832,9 @@ def _state_from_arrays(saved: dict, prefix: str, template: lbase.LearnerState,
         reward=full(lb.reward, buf.reward), weight=full(lb.weight, buf.weight)))
 
 
-def _save(path, fingerprint, states, horizon, results, next_round):
-    arrays = {}
-    for q, state in enumerate(states):
-        arrays.update(state_arrays(state, f"L{q}_", horizon))
-    arrays.update({f: np.asarray(getattr(results, f)) for f in results._fields})
+def _save(path, fingerprint, results, rewards, next_round):
+    """The run's checkpoint: results, every exploration grasp's reward (int8 [R + 1, O, S,
+    Q, E]) and the next round; the learner states are rebuilt on resume (:func:`run`)."""
+    arrays = {f: np.asarray(getattr(results, f)) for f in results._fields}
     io.save_npz(path, fingerprint=np.asarray(fingerprint), next_round=np.asarray(next_round),
-                **arrays)
+                explore_reward=np.asarray(rewards, np.int8), **arrays)

@@ -111,6 +111,51 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
     assert again["table"] == res["table"]
 
 
+@pytest.mark.parametrize("policies", [
+    ("sern", "ensemble_ts"),
+    pytest.param(("sern", "neural_lints", "neural_linucb", "neural_ucb", "normalized",
+                  "egreedy_decay", "sern_decay"), marks=pytest.mark.slow)])
+def test_baselines_resume_by_replay_to_the_same_results_and_states(
+        policies, tiny_theta0, spec, tmp_path):
+    """The checkpoint holds results and rewards only (kilobytes, no learner state); a run
+    stopped after round 1 resumes by replaying the learners' updates and ends with the
+    uninterrupted run's results (regret included) and learner states, bit for bit, for the
+    randomised learners too (Thompson draws, bootstrap weights, ensemble members)."""
+    config = runner.OnlineConfig(policies=policies, num_seeds=2, rounds=2, explore=2,
+                                 evaluate=1, eval_poses=1, eval_trials=1, fit_steps=2,
+                                 batch_size=4, regret_trials=1, regret_grasps=1)
+    aside = tmp_path / "round1.npz"
+    real = runner._save
+
+    def save_and_copy(path, *args):
+        real(path, *args)
+        if args[-1] == 2:
+            shutil.copy(path, aside)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "_save", save_and_copy)
+        full = runner.run(config, [spec], tmp_path / "a", theta0=tiny_theta0,
+                          progress=False, log=_quiet)
+    saved = io.load_npz(aside)
+    assert not any(k.startswith("L") for k in saved)  # no learner state
+    assert (tmp_path / "a" / "checkpoint.npz").stat().st_size < 64 * 1024
+    np.testing.assert_array_equal(saved["explore_reward"][1].transpose(0, 2, 1, 3).mean(-1),
+                                  full["results"].explore_success[1])
+    (tmp_path / "b").mkdir()
+    shutil.copy(aside, tmp_path / "b" / "checkpoint.npz")
+    lines = []
+    resumed = runner.run(config, [spec], tmp_path / "b", theta0=tiny_theta0,
+                         progress=False, log=lines.append)
+    assert any("at round 2" in line for line in lines)
+    assert any("replayed rounds 1..1" in line for line in lines)
+    for name in full["results"]._fields:
+        np.testing.assert_array_equal(getattr(resumed["results"], name),
+                                      getattr(full["results"], name), err_msg=name)
+    assert np.isfinite(full["results"].pseudo_regret[1:]).all()
+    for a, b in zip(full["states"], resumed["states"]):
+        jax.tree.map(np.testing.assert_array_equal, a, b)
+
+
 def test_other_run_in_same_dir_is_refused(run_a, tiny_theta0, spec, tmp_path):
     _, out, _ = run_a
     with pytest.raises(ValueError, match="no objects"):

@@ -19,6 +19,7 @@ reported together (one family per setting, named in ``summary.json``).
     python -m experiments.grasp_learning loss             # BCE vs the printed L1 (control)
     python -m experiments.grasp_learning schedule         # constant alpha vs alpha0/ln(T^p)
     python -m experiments.grasp_learning regret           # 3 objects, independent oracle
+                                                          # (4 + 4 trials, first 5 grasps)
     python -m experiments.grasp_learning summarise experiments/results/paper
     python -m experiments.grasp_learning collect runs/grasp_strong experiments/results/strong
 
@@ -67,7 +68,7 @@ def runs_of(setting: str, base):
     if setting == "schedule":
         return [("schedule", r(base, policies=("sern", "sern_log")))]
     if setting == "regret":
-        return [("regret", r(base, regret_trials=4))]
+        return [("regret", r(base, regret_trials=4, regret_grasps=5))]
     raise ValueError(f"unknown setting {setting!r}; choose from {SETTINGS}")
 
 
@@ -283,12 +284,12 @@ def collect(out, results) -> list[Path]:
         meta = io.load_json(meta_file)
         target = Path(results) / meta["file"]
         ckpt = meta_file.parent / "checkpoint.npz"
-        if target.exists() or not ckpt.exists():
+        if not ckpt.exists():
             continue
         saved = io.load_npz(ckpt)
         done = int(saved["next_round"]) - 1
-        if done < 0:
-            continue
+        if done < 0 or (target.exists() and io.load_json(target)["rounds_done"] >= done):
+            continue  # nothing finished, or the file already has these rounds
         theta0 = artifacts.load_theta0(meta.get("theta0_dir"))
         config = runner.OnlineConfig(**{k: tuple(v) if isinstance(v, list) else v
                                         for k, v in meta["config"].items()})

@@ -1,0 +1,71 @@
+#!/bin/bash
+# The headline runs on the H100 device machine (16 cores, one GPU), several at once, each
+# pinned to its own cores and stopped at its own time limit; what finished (or, for a stopped
+# run, the rounds it finished: `collect`) comes back as one archive, $OUT/results.tgz, with
+# every job's log. Usage, from the repository root on the device machine:
+#
+#     bash experiments/results/device_headline.sh JOB [JOB ...]
+#
+# where a JOB is NAME:CORES:LIMIT_S, NAME one of
+#   strong1 strong2 strong3   the 20-seed strong run, objects 1-2, 3-4, 5-6 of the hard set
+#   transfer-<cell>           one 20-round transfer cell (experiments.grasp_sensitivity)
+#   paper alpha core_set loss schedule regret   a grasp_learning setting
+# e.g. strong1:0-3:560 transfer-A:12-13:560. The results' per-seed files name the command,
+# the machine and the seconds; this script only schedules them. (SMOKE="--objects 1 --seeds
+# 2 --rounds 1" shrinks every run, for trying the script itself.)
+set -u
+export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+T0=$(date +%s)
+R=$OUT/res
+mkdir -p "$R/logs"
+# RESUME=DIR: the unpacked results.tgz of an earlier call (its checkpoints let stopped runs
+# go on from their last finished round)
+if [ -n "${RESUME:-}" ]; then cp -r "$RESUME"/. "$R"/; fi
+RUNS=${RUNS:-$R/runs}
+HARD=($(python3 -c "from sern_jax.grasp import artifacts as a; print(' '.join(a.hard_set(a.load_theta0(), 6)['objects']))"))
+echo "hard set: ${HARD[*]}" | tee "$R/logs/jobs.txt"
+nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >> "$R/logs/jobs.txt" 2>&1
+lscpu | grep -E "Model name|^CPU\(s\)" >> "$R/logs/jobs.txt"
+
+run() {  # NAME CORES LIMIT CMD...
+  local name=$1 cores=$2 limit=$3
+  shift 3
+  (
+    s=$(date +%s)
+    timeout -s KILL "$limit" taskset -c "$cores" "$@" > "$R/logs/$name.log" 2>&1
+    echo "$name: exit $? after $(( $(date +%s) - s )) s on cores $cores: $*" >> "$R/logs/jobs.txt"
+  ) &
+}
+
+for job in "$@"; do
+  IFS=: read -r name cores limit <<< "$job"
+  case $name in
+    strong1) run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning strong \
+               --seeds 20 --only "${HARD[0]},${HARD[1]}" --no-progress --out $RUNS/strong \
+               --results "$R/strong" ${SMOKE:-} ;;
+    strong2) run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning strong \
+               --seeds 20 --only "${HARD[2]},${HARD[3]}" --no-progress --out $RUNS/strong \
+               --results "$R/strong" ;;
+    strong3) run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning strong \
+               --seeds 20 --only "${HARD[4]},${HARD[5]}" --no-progress --out $RUNS/strong \
+               --results "$R/strong" ;;
+    transfer-*) run "$name" "$cores" "$limit" python3 -m experiments.grasp_sensitivity \
+               transfer-cell "${name#transfer-}" --out "$R/transfer" --seeds 5 --rounds 20 \
+               --objects 3 ${SMOKE:-} ;;
+    paper|alpha|core_set|loss|schedule|regret) run "$name" "$cores" "$limit" python3 -m \
+               experiments.grasp_learning "$name" --no-progress --out "$RUNS/$name" \
+               --results "$R/$name" ${SMOKE:-} ;;
+    *) echo "unknown job $name" >> "$R/logs/jobs.txt" ;;
+  esac
+done
+wait
+# stopped runs: their finished rounds, from the checkpoints
+python3 -m experiments.grasp_learning collect "$R/transfer/runs" "$R/transfer" \
+  >> "$R/logs/collect.log" 2>&1
+for d in "$RUNS"/*; do
+  [ -d "$d" ] && python3 -m experiments.grasp_learning collect "$d" "$R/$(basename "$d")" \
+    >> "$R/logs/collect.log" 2>&1
+done
+echo "all jobs done after $(( $(date +%s) - T0 )) s" >> "$R/logs/jobs.txt"
+cd "$R" && tar czf "$OUT/results.tgz" . && cp logs/jobs.txt "$OUT/" && du -sh "$OUT/results.tgz"
+cat "$R/logs/jobs.txt"

@@ -88,13 +88,19 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/d0", help="dataset directory")
     p.add_argument("--no-progress", action="store_true")
+    from sern_jax import distributed  # --ray [ADDRESS]: shards as Ray tasks (issue 20)
+
+    distributed.add_arguments(p)
     p.set_defaults(func=_run_dataset)
     return p
 
 
 def _run_dataset(args) -> int:
+    from sern_jax import distributed
+
     _check_seed(args.seed)
     _check_out(args.out)
+    ray = distributed.from_args(args)  # None without --ray
     from sern_jax.grasp import budget, dataset
 
     try:
@@ -105,7 +111,8 @@ def _run_dataset(args) -> int:
         raise ValueError(_dataset_flags(str(e))) from None
     _check_size(budget.dataset(objects=args.objects, poses=args.poses, trials=args.trials,
                                objects_per_shard=config.objects_per_shard), args.out)
-    summary = dataset.generate(config, args.out, progress=not args.no_progress)
+    summary = dataset.generate(config, args.out, progress=not args.no_progress,
+                               **({"ray": ray} if ray is not None else {}))
     print(json.dumps(summary, indent=2))
     print(f"dataset directory: {args.out}")
     return 0
@@ -331,6 +338,11 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
                         "exploration pose M times (the oracle) and report each round's "
                         "pseudo-regret per policy; costly (64 x M trials per exploration "
                         "grasp, shared by the policies), 0 = off")
+    p.add_argument("--regret-grasps", type=int, default=0, metavar="G",
+                   help="with --regret-trials: run the oracle on the first G exploration "
+                        "grasps of each round only and scale their pseudo-regret by "
+                        "--explore / G (an unbiased estimate at G / --explore of the "
+                        "cost); 0 = every grasp")
     p.add_argument("--fit-steps", type=_positive_int, default=40)
     p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp")
     p.add_argument("--loss", choices=("bce", "l1"), default="bce")
@@ -397,7 +409,8 @@ _LEARN_FLAGS = {
     "num_seeds": "--seeds", "rounds": "--rounds", "explore": "--explore",
     "evaluate": "--evaluate", "alpha0": "--alpha0", "alpha": "--alpha",
     "epsilon": "--epsilon", "eval_poses": "--eval-poses", "eval_trials": "--eval-trials",
-    "regret_trials": "--regret-trials", "fit_steps": "--fit-steps", "seed": "--seed",
+    "regret_trials": "--regret-trials", "regret_grasps": "--regret-grasps",
+    "fit_steps": "--fit-steps", "seed": "--seed",
     "core_set": "--core-set", "loss": "--loss", "backend": "--backend",
 }
 
@@ -506,6 +519,7 @@ def check_learn_args(args, num_objects: int | None = None):
             explore=args.explore, evaluate=args.evaluate, alpha=args.alpha,
             epsilon=args.epsilon, alpha0=args.alpha0, p=args.p, eval_poses=args.eval_poses,
             eval_trials=args.eval_trials, regret_trials=args.regret_trials,
+            regret_grasps=args.regret_grasps,
             fit_steps=args.fit_steps, core_set=args.core_set, loss=args.loss, seed=args.seed,
             backend=getattr(args, "backend", "native"),
             hyper={k: v for k, v in hyper.items() if k not in ("alpha", "epsilon", "alpha0", "p")})
@@ -561,7 +575,7 @@ def _check_learn_size(config, num_objects: int, out) -> None:
         rounds=config.rounds, explore=config.explore, evaluate=config.evaluate,
         eval_poses=config.eval_poses, eval_trials=config.eval_trials,
         regret_trials=config.regret_trials, fit_steps=config.fit_steps,
-        batch_size=config.batch_size,
+        batch_size=config.batch_size, regret_grasps=config.regret_grasps,
         network_copies=sum(config.hyperparameters().get("ensemble_size", 1)
                            if name == "ensemble_ts" else 1 for name in config.policies)), out)
 

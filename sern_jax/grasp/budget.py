@@ -159,13 +159,14 @@ def screen(*, objects: int, poses: int, trials: int) -> Estimate:
 def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
           evaluate: int, eval_poses: int, eval_trials: int, regret_trials: int,
           fit_steps: int = 40, batch_size: int = 32,
-          network_copies: int | None = None) -> Estimate:
+          network_copies: int | None = None, regret_grasps: int = 0) -> Estimate:
     """``sern grasp learn``: O objects x Q policies x S seeds, R rounds of E exploration
     grasps, V greedy evaluations, the low-variance evaluation (P fixed poses x M trials) and
-    the regret oracle (every valid candidate of every exploration pose, regret_trials times).
+    the regret oracle (every valid candidate of the first ``regret_grasps`` exploration poses
+    of each phase, 0 = all, regret_trials times to choose and as many to value).
 
-    Memory: the learner's buffer [O, S, Q, R*E] crops (twice: the checkpoint is compressed
-    from a copy), the O*S*Q network copies with Adam moments, one round's exploration
+    Memory: the learner's buffer [O, S, Q, R*E] crops, the O*S*Q network copies with Adam
+    moments, one round's exploration
     contexts and crops [O, S, E, K], the fixed evaluation poses [O, S, P] with their crops,
     their repeated trials [O, S, Q, P*M] and one object's oracle batch [S, E, K, regret].
     ``network_copies``: networks (with Adam moments) per (object, seed) over all learners,
@@ -177,7 +178,8 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     eval_ctx = o * s * evaluate * (CONTEXT_BYTES + K * (CROP_BYTES + 8 * q))
     lowvar = o * s * eval_poses * (CONTEXT_BYTES + K * (CROP_BYTES + 8 * q))
     lowvar_trials = o * s * q * eval_poses * eval_trials * TRIAL_ROW_BYTES
-    oracle = s * e * K * regret_trials * TRIAL_ROW_BYTES
+    g = regret_grasps or e  # the oracle's grasps per phase
+    oracle = s * g * K * regret_trials * TRIAL_ROW_BYTES
     fit = o * s * q * batch_size * CROP_BYTES * 4
     memory_parts = {
         "objects x --seeds x policies x --rounds x --explore": 3 * buffer + round_ctx + fit,
@@ -192,7 +194,7 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
         "objects x --seeds x --rounds x --explore": r * e * o * s * q,
         "--evaluate": (r + 1) * evaluate * o * s * q,
         "--eval-poses x --eval-trials": (r + 1) * o * s * q * eval_poses * eval_trials,
-        "--regret-trials": r * o * s * e * K * regret_trials,
+        "--regret-trials": 2 * r * o * s * g * K * regret_trials,
     }
     trials = sum(trial_parts.values())
     contexts = o * s * (r * e + (r + 1) * evaluate + eval_poses)
@@ -201,11 +203,12 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     # updates: ~31 s for the paper's 6 x 3 x 5 copies x 5 rounds x 40 steps (README)
     update_s = r * o * s * q * fit_steps * batch_size * 31.0 / (6 * 3 * 5 * 5 * 40 * 32)
     return Estimate(
-        memory_bytes=int(memory), disk_bytes=int(2 * buffer + 2 * copies + 1e6),
+        # the checkpoint: results and per-grasp rewards (the states are replayed on resume)
+        memory_bytes=int(memory), disk_bytes=int((r + 1) * o * s * q * (e + 8) * 8 + 1e6),
         trials=int(trials), contexts=int(contexts),
         seconds=_seconds(trials, contexts, update_s * 2 / _cores()),
         memory_flags=_largest(memory_parts), work_flags=_largest(trial_parts),
-        disk_flags="objects x --seeds x policies x --rounds x --explore")
+        disk_flags="objects x --seeds x policies x --rounds x --explore")  # results
 
 
 def _free_disk(out: str | os.PathLike | None) -> int | None:

@@ -547,6 +547,8 @@ def run(
     init and each finished round's update on the same inputs (the exploration contexts
     recomputed from their keys, the saved choices and rewards), which is the computation
     of the uninterrupted run, so it gives the same results (tests/grasp/test_runner.py).
+    A run that had already finished returns its results with ``states`` None (nothing is
+    replayed).
     """
     out_dir = Path(out_dir)
     names = [s.name for s in specs]
@@ -685,7 +687,7 @@ def run(
         jax.block_until_ready(states)
         timings["update"] += time.perf_counter() - t
 
-    if start_round > 1:  # replay: the learners' states after round start_round - 1
+    if 1 < start_round <= num_r:  # replay: the learners' states after round start_round - 1
         t = time.perf_counter()
         for r in range(1, start_round):
             _, depth, cands = explore_contexts(r)
@@ -742,6 +744,8 @@ def run(
     rows = table_rows(names, config.policies, results.paper_eval,
                       results.lowvar_eval if config.eval_poses else None,
                       results.pseudo_regret if config.regret_trials else None)
+    if start_round > num_r:  # finished before this call: nothing replayed, no states
+        states = None
     return {"table": rows, "results": results, "timings": timings,
             "trial_counts": trial_counts, "objects": names,
             "fingerprint": fingerprint, "config": config, "states": states}

@@ -430,6 +430,8 @@ def test_bad_config_is_a_clear_error(field, value, match):
     (["--alpha0", "inf"], "--alpha0"),
     (["--eval-poses", "-1"], "--eval-poses must be an integer >= 0"),
     (["--regret-trials", "-2"], "--regret-trials must be an integer >= 0"),
+    (["--regret-grasps", "-1"], "--regret-grasps must be an integer >= 0"),
+    (["--regret-grasps", "21"], "--regret-grasps must be <= --explore (20), got 21"),
     (["--eval-trials", "0"], "--eval-trials must be >= 1 when --eval-poses > 0"),
     (["--p", "1.5"], "--p must"),
     (["--mesh", "/nonexistent/part.obj"], "mesh file not found"),
@@ -623,3 +625,18 @@ def test_check_actions_cases(spec):
                           ([2, -5], "candidate -5, not a valid slot")):
         with pytest.raises(runner.LearnerError, match=match):
             check(action)
+
+
+def test_budget_counts_both_oracle_sets_and_the_subsample():
+    """The oracle's trials in the size check: selection and valuation sets (2 x M per
+    candidate) on the first G grasps of each phase; the checkpoint is results only."""
+    from sern_jax.grasp import budget
+
+    kw = dict(objects=6, policies=11, seeds=20, rounds=5, explore=20, evaluate=5,
+              eval_poses=4, eval_trials=8)
+    off = budget.learn(regret_trials=0, **kw)
+    full = budget.learn(regret_trials=2, **kw)
+    sub = budget.learn(regret_trials=2, regret_grasps=5, **kw)
+    assert full.trials - off.trials == 2 * 5 * 6 * 20 * 20 * budget.K * 2
+    assert (sub.trials - off.trials) * 4 == full.trials - off.trials
+    assert off.disk_bytes < 20e6  # no learner state in the checkpoint

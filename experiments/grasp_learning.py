@@ -46,7 +46,8 @@ FIELDS = ("lowvar_eval", "paper_eval", "explore_success", "pseudo_regret")
 AXES = "[round 0..R, object, policy, seed]; round 0 = θ0 before learning"
 
 __all__ = ["SETTINGS", "runs_of", "per_seed_doc", "save_per_seed", "load_results",
-           "summarise", "collect", "main"]
+           "summarise", "collect", "table1_markdown", "fixed_pose_markdown",
+           "pooled_markdown", "comparisons_markdown", "main"]
 
 
 def runs_of(setting: str, base):
@@ -221,33 +222,35 @@ def summarise(results_dir, write: bool = True) -> dict:
     else:
         ref, others = keys[0], keys[1:]
     comps = {}
+    ablation = not (len(labels) == 1 and ref[1] == "sern")
     if others and docs[labels[0]]["seeds"] > 1:
-        a = finals[ref]
         objects = docs[ref[0]]["objects"]
-        names, diffs = [], []
+        lv_ok = not np.isnan(finals[ref]["lowvar"]).any()
+        names, diffs, ex_names, ex_diffs, rg_names, rg_diffs = [], [], [], [], [], []
         for k in others:
-            b = finals[k]
-            tag = f"{ref[0]}:{ref[1]} - {k[0]}:{k[1]}"
-            if not np.isnan(a["lowvar"]).any():
+            # SERN - peer within one run; variant - first variant across an ablation's runs
+            a, b = (finals[k], finals[ref]) if ablation else (finals[ref], finals[k])
+            left, right = (k, ref) if ablation else (ref, k)
+            tag = f"{left[0]}:{left[1]} - {right[0]}:{right[1]}"
+            if lv_ok:
                 names.append(f"{tag} | fixed-pose, pooled")
                 diffs.append(a["lowvar"].mean(0) - b["lowvar"].mean(0))
             names.append(f"{tag} | 5-grasp, pooled")
             diffs.append(a["paper"].mean(0) - b["paper"].mean(0))
-            if len(labels) == 1 and not np.isnan(a["lowvar"]).any():
+            if not ablation and lv_ok:
                 for o, n in enumerate(objects):
                     names.append(f"{tag} | fixed-pose, {n}")
                     diffs.append(a["lowvar"][o] - b["lowvar"][o])
-        comps["final_round"] = _comparisons(names, diffs)
-        comps["explore_success"] = _comparisons(
-            [f"{ref[0]}:{ref[1]} - {k[0]}:{k[1]}" for k in others],
-            [finals[ref]["explore"] - finals[k]["explore"] for k in others])
-        if a["regret"] is not None:
-            names, diffs = [], []
-            for k in others:
+            ex_names.append(tag)
+            ex_diffs.append(a["explore"] - b["explore"])
+            if a["regret"] is not None:
                 for o, n in enumerate(objects):
-                    names.append(f"{ref[1]} - {k[1]} | {n}")
-                    diffs.append(a["regret"][o] - finals[k]["regret"][o])
-            comps["regret_total"] = _comparisons(names, diffs)
+                    rg_names.append(f"{tag} | {n}")
+                    rg_diffs.append(a["regret"][o] - b["regret"][o])
+        comps["final_round"] = _comparisons(names, diffs)
+        comps["explore_success"] = _comparisons(ex_names, ex_diffs)
+        if rg_names:
+            comps["regret_total"] = _comparisons(rg_names, rg_diffs)
     summary = {
         "results_dir": results_dir.name,
         "runs": runs,
@@ -263,6 +266,94 @@ def summarise(results_dir, write: bool = True) -> dict:
     if write:
         io.save_json(results_dir / "summary.json", summary)
     return summary
+
+
+# ----------------------------------------------------------------------------- markdown
+# docs/RESULTS.md prints these tables verbatim; tests/test_results_quoted.py rebuilds them
+# from the committed per-seed files and checks that the page holds them.
+
+
+def _pts(x, digits: int = 1, sign: bool = True) -> str:
+    """100 x, rounded, without a negative zero."""
+    v = round(100 * float(x), digits) + 0.0
+    return f"{v:+.{digits}f}" if sign else f"{v:.{digits}f}"
+
+
+def _pm(c, digits: int = 1) -> str:
+    return f"{_pts(c['mean'], digits)} ± {_pts(c['half'], digits, False)}"
+
+
+def _short(name: str) -> str:
+    """'strong:sern - strong:greedy | fixed-pose, pooled' -> 'sern − greedy, fixed-pose,
+    pooled' (labels kept where they differ: ablations)."""
+    pair, _, what = name.partition(" | ")
+    a, _, b = pair.partition(" - ")
+    (la, pa), (lb, pb) = a.partition(":")[::2], b.partition(":")[::2]
+    if pa and pb:
+        pair = f"{pa} − {pb}" if la == lb else f"{la} − {lb}"
+    return f"{pair}, {what}" if what else pair
+
+
+def _holm_note(c) -> str:
+    return f"{c['pvalue_holm']:.2f}" if c["pvalue_holm"] >= 0.01 else f"{c['pvalue_holm']:.0e}"
+
+
+def table1_markdown(summary: dict, label: str) -> str:
+    """Table I in the paper's layout: 5-grasp success % per round, mean over seeds (± SE =
+    sd/√n over the seeds, ddof 1: the statistic the paper prints), Max and Imprv."""
+    run = summary["runs"][label]
+    r = run["rounds_done"]
+    head = ("| Obj. | Alg. | θ0 | " + " | ".join(f"Round {k}" for k in range(1, r + 1))
+            + " | Max. | Imprv. |")
+    lines = [head, "|" + "---|" * (r + 5)]
+    for row in run["table"]:
+        cells = [f"{m:.0f}% (±{se:.2f})" for m, se in zip(row["rounds"], row["se"])]
+        imprv = f"{100 * row['imprv']:.0f}%" if row["imprv"] is not None else "n/a"
+        lines.append(f"| {row['object']} | {row['policy']} | {row['theta0']:.0f}% | "
+                     + " | ".join(cells) + f" | {row['max']:.0f}% | {imprv} |")
+    return "\n".join(lines)
+
+
+def fixed_pose_markdown(summary: dict, label: str) -> str:
+    """Fixed-pose success % per round 0..R, mean over seeds (± SE over the seeds)."""
+    run = summary["runs"][label]
+    r = run["rounds_done"]
+    lines = ["| Obj. | Alg. | " + " | ".join(f"R{k}" for k in range(r + 1)) + " |",
+             "|" + "---|" * (r + 3)]
+    n = run["seeds"]
+    for row in run["table"]:
+        se = [sd * (n / (n - 1)) ** 0.5 / n ** 0.5 for sd in row["lowvar_std"]]
+        cells = [f"{m:.0f}% (±{e:.1f})" for m, e in zip(row["lowvar_rounds"], se)]
+        lines.append(f"| {row['object']} | {row['policy']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def pooled_markdown(summary: dict, label: str) -> str:
+    """Per policy, pooled over the objects: θ0, round 1 and round R success (5-grasp /
+    fixed-pose), round R − θ0 (fixed-pose, t interval), exploration success."""
+    run = summary["runs"][label]
+    lines = ["| | θ0 | round 1 | round R | round R − θ0 (fixed-pose) | exploration success |",
+             "|---|---|---|---|---|---|"]
+    for pol, rec in run["policies_pooled"].items():
+        pe, lv = rec["paper_by_round"], rec["lowvar_by_round"]
+        lines.append(f"| {pol} | {100 * pe[0]:.1f} % / {100 * lv[0]:.1f} % | "
+                     f"{100 * pe[1]:.1f} % / {100 * lv[1]:.1f} % | "
+                     f"{100 * pe[-1]:.1f} % / {100 * lv[-1]:.1f} % | "
+                     f"{_pm(rec['final_minus_theta0_lowvar'])} | "
+                     f"{100 * rec['explore_success']:.1f} % |")
+    return "\n".join(lines).replace("round R", f"round {run['rounds_done']}")
+
+
+def comparisons_markdown(summary: dict, family: str = "final_round") -> str:
+    """One family of paired comparisons: mean ± 95 % t half-width, the t interval's ends,
+    the two-sided p and its Holm adjustment over the family."""
+    rows = summary["comparisons"][family]
+    lines = ["| comparison | difference (points) | 95 % t interval | p | Holm p |",
+             "|---|---|---|---|---|"]
+    for c in rows:
+        lines.append(f"| {_short(c['name'])} | {_pm(c)} | [{_pts(c['lower'])}, "
+                     f"{_pts(c['upper'])}] | {c['pvalue']:.3f} | {_holm_note(c)} |")
+    return "\n".join(lines)
 
 
 def _machine_line() -> str:

@@ -311,7 +311,7 @@ def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
         done = d["rounds_done"]  # a stopped cell also reports its last finished round
         rep = sorted({r for r in rounds if r <= done} | ({done} if done >= 1 else set()))
         gap = grasp_learning._ci(theta_a - theta_b)
-        row = {"world": d.get("world"), "rounds_done": d["rounds_done"],
+        row = {"world": d.get("world"), "rounds": d["rounds"], "rounds_done": d["rounds_done"],
                "rounds_reported": rep, "theta0_A": grasp_learning._ci(theta_a),
                "theta0_B": grasp_learning._ci(theta_b), "gap": gap, "policies": {},
                "seconds": d["seconds"], "machine": d["parts"][0]["machine"]}
@@ -353,6 +353,33 @@ def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
     })
     io.save_json(out / "summary.json", summary)
     return summary
+
+
+def transfer_markdown(summary: dict) -> str:
+    """The transfer table docs/RESULTS.md prints (rebuilt by tests/test_results_quoted.py):
+    per cell θ0's success in B and the gap to A (paired t over seeds), then per policy the
+    gain by rounds 5 and 20 (t over seeds) and the share of the gap it recovers."""
+    from .grasp_learning import _pm
+
+    cells = summary["cells"]
+    pols = list(next(iter(cells.values()))["policies"])
+    head = ["world B", "θ0 in B", "gap A − B"]
+    for pol in pols:
+        head += [f"{pol}: gain by 5 / 20 rounds", f"{pol}: recovered"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for cell, c in cells.items():
+        stopped = c["rounds_done"] < c["rounds"]
+        row = [cell + (f" (stopped after round {c['rounds_done']})" if stopped else ""),
+               f"{100 * c['theta0_B']['mean']:.1f} %", _pm(c["gap"])]
+        for pol in pols:
+            rec = c["policies"][pol]
+            gains = [_pm(rec["gain"][str(r)]) if str(r) in rec["gain"] else "n/a"
+                     for r in (5, 20)]
+            rcv = [f"{100 * rec['recovered'][str(r)]:.0f} %"
+                   if rec["recovered"].get(str(r)) is not None else "–" for r in (5, 20)]
+            row += [" / ".join(gains), " / ".join(rcv)]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
 
 
 def t_dict(ci) -> dict:

@@ -52,7 +52,7 @@ WORLD_A = CELLS[0]  # 6N_mu0.3-0.8_clean: the world θ0 was pretrained in
 PEERS = ("greedy", "egreedy")
 
 __all__ = ["CELLS", "WORLD_A", "TRANSFER_CELLS", "world", "transfer_world", "run_cell",
-           "run_transfer_cell", "summarise", "summarise_transfer", "main"]
+           "run_transfer_cell", "summarise", "summarise_transfer", "transfer_markdown", "main"]
 
 
 def world(cell: str):

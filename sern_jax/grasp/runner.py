@@ -31,6 +31,7 @@ execution error), so comparisons are paired. Keys: object ``o`` (by name, CRC32)
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
 import hashlib
@@ -624,12 +625,36 @@ def run(
             st, crops.image, crops.depth, cands.valid, u)) for lrn, st in zip(chosen, states)],
             axis=2)  # [O, S, Q, N]
 
-    def evaluate(r, states):
+    # Contexts (a CPU-bound Python loop: resting-pose drops, rendering, candidates) are
+    # made one step ahead on a background thread while the main thread runs trials (native
+    # MuJoCo threads) and the learners: a round's evaluation contexts and the next round's
+    # exploration contexts. They depend on their keys only, so results are unchanged; the
+    # simulators run on copies of the scene models and only read them.
+    def make_contexts(kind, r):
+        stream, num = {"explore": (EXPLORE_CONTEXT, num_e),
+                       "eval": (EVAL_CONTEXT, config.evaluate)}[kind]
+        return _stack_contexts(
+            [[_contexts(_stream(keys_os[o][s], stream, r), specs[o], num, models[o],
+                        context_config) for s in range(num_s)]
+             for o in range(num_o)])  # poses [O, S, N, 7]
+
+    ahead = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    pending = {}
+
+    def prefetch(kind, r):
+        if r <= num_r and (kind, r) not in pending:
+            pending[(kind, r)] = ahead.submit(make_contexts, kind, r)
+
+    def contexts(kind, r):
         t = time.perf_counter()
-        poses, depth, cands = _stack_contexts(
-            [[_contexts(_stream(keys_os[o][s], EVAL_CONTEXT, r), specs[o], config.evaluate,
-                        models[o], context_config) for s in range(num_s)]
-             for o in range(num_o)])
+        prefetch(kind, r)
+        out = pending.pop((kind, r)).result()
+        timings["contexts"] += time.perf_counter() - t
+        return out
+
+    def evaluate(r, states):
+        poses, depth, cands = contexts("eval", r)
+        t = time.perf_counter()
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (config.evaluate,))))(
             _stream_keys(keys_os, EVAL_UNIFORM, r)))
         action = greedy_actions(states, crops_fn(depth, cands), cands, u)
@@ -657,18 +682,16 @@ def run(
         timings["evaluate"] += time.perf_counter() - t
 
     if start_round == 0:
+        prefetch("explore", 1)
         evaluate(0, states)
         _save(ckpt, fingerprint, results, rewards, 1)
         start_round = 1
         bar.update(1)
 
     def explore_contexts(r):
-        t = time.perf_counter()
-        out = _stack_contexts(
-            [[_contexts(_stream(keys_os[o][s], EXPLORE_CONTEXT, r), specs[o], num_e,
-                        models[o], context_config) for s in range(num_s)]
-             for o in range(num_o)])  # poses [O, S, E, 7]
-        timings["contexts"] += time.perf_counter() - t
+        out = contexts("explore", r)
+        prefetch("eval", r)
+        prefetch("explore", r + 1)
         return out
 
     def update_all(r, crops, action, success):
@@ -690,7 +713,8 @@ def run(
     if 1 < start_round <= num_r:  # replay: the learners' states after round start_round - 1
         t = time.perf_counter()
         for r in range(1, start_round):
-            _, depth, cands = explore_contexts(r)
+            _, depth, cands = contexts("explore", r)
+            prefetch("explore", r + 1)
             update_all(r, crops_fn(depth, cands),
                        results.explore_action[r].transpose(0, 2, 1, 3), rewards[r] > 0)
         log(f"replayed rounds 1..{start_round - 1} in {time.perf_counter() - t:.1f} s")
@@ -741,6 +765,7 @@ def run(
         _save(ckpt, fingerprint, results, rewards, r + 1)
         bar.update(1)
     bar.close()
+    ahead.shutdown(wait=False, cancel_futures=True)
     rows = table_rows(names, config.policies, results.paper_eval,
                       results.lowvar_eval if config.eval_poses else None,
                       results.pseudo_regret if config.regret_trials else None)

@@ -18,6 +18,7 @@ reported together (one family per setting, named in ``summary.json``).
     python -m experiments.grasp_learning core_set         # core set none / random / DPP
     python -m experiments.grasp_learning loss             # BCE vs the printed L1 (control)
     python -m experiments.grasp_learning schedule         # constant alpha vs alpha0/ln(T^p)
+    python -m experiments.grasp_learning ablations        # the four, each distinct run once
     python -m experiments.grasp_learning regret           # 3 objects, independent oracle
                                                           # (4 + 4 trials, first 5 grasps)
     python -m experiments.grasp_learning summarise experiments/results/paper
@@ -42,6 +43,8 @@ from pathlib import Path
 import numpy as np
 
 SETTINGS = ("paper", "strong", "alpha", "core_set", "loss", "schedule", "regret")
+ABLATIONS = ("alpha", "core_set", "loss", "schedule")
+PAPER_LABELS = ("alpha=0.05", "core=dpp", "loss=bce")  # an ablation's reference run
 FIELDS = ("lowvar_eval", "paper_eval", "explore_success", "pseudo_regret")
 AXES = "[round 0..R, object, policy, seed]; round 0 = θ0 before learning"
 
@@ -219,8 +222,9 @@ def summarise(results_dir, write: bool = True) -> dict:
     if len(labels) == 1 and "sern" in docs[labels[0]]["policies"] and len(keys) > 1:
         ref = (labels[0], "sern")
         others = [k for k in keys if k != ref]
-    else:
-        ref, others = keys[0], keys[1:]
+    else:  # an ablation: against the paper's configuration where it is one of the runs
+        ref = next((k for k in keys if k[0] in PAPER_LABELS), keys[0])
+        others = [k for k in keys if k != ref]
     comps = {}
     ablation = not (len(labels) == 1 and ref[1] == "sern")
     if others and docs[labels[0]]["seeds"] > 1:
@@ -373,25 +377,31 @@ def collect(out, results) -> list[Path]:
     written = []
     for meta_file in sorted(Path(out).glob("*/run_meta.json")):
         meta = io.load_json(meta_file)
-        target = Path(results) / meta["file"]
         ckpt = meta_file.parent / "checkpoint.npz"
         if not ckpt.exists():
             continue
         saved = io.load_npz(ckpt)
         done = int(saved["next_round"]) - 1
-        if done < 0 or (target.exists() and io.load_json(target)["rounds_done"] >= done):
-            continue  # nothing finished, or the file already has these rounds
+        targets = meta.get("targets") or [{"file": meta["file"], "label": meta["label"],
+                                           "setting": meta["setting"]}]
         theta0 = artifacts.load_theta0(meta.get("theta0_dir"))
         config = runner.OnlineConfig(**{k: tuple(v) if isinstance(v, list) else v
                                         for k, v in meta["config"].items()})
         res = {f: saved[f] for f in FIELDS}
-        doc = per_seed_doc(res, label=meta["label"], setting=meta["setting"],
-                           objects=meta["objects"], all_objects=meta["all_objects"],
-                           config=config, rounds_done=done, seconds=meta.get("seconds", 0.0),
-                           command=meta["command"], theta0=theta0,
-                           extra={"stopped_early": True, **meta.get("extra", {})})
-        save_per_seed(target, doc)
-        written.append(target)
+        for tg in targets:
+            target = Path(results) / tg["file"]
+            if done < 0 or (target.exists() and io.load_json(target)["rounds_done"] >= done):
+                continue  # nothing finished, or the file already has these rounds
+            doc = per_seed_doc(res, label=tg["label"], setting=tg["setting"],
+                               objects=meta["objects"], all_objects=meta["all_objects"],
+                               config=config, rounds_done=done,
+                               seconds=meta.get("seconds", 0.0), command=meta["command"],
+                               theta0=theta0, extra={"stopped_early": True,
+                                                     **meta.get("extra", {}),
+                                                     **tg.get("extra", {})})
+            target.parent.mkdir(parents=True, exist_ok=True)
+            save_per_seed(target, doc)
+            written.append(target)
     return written
 
 
@@ -414,7 +424,10 @@ def main(argv=None) -> int:
         return 0
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("setting", choices=SETTINGS)
+    parser.add_argument("setting", choices=SETTINGS + ("ablations",))
+    parser.add_argument("--labels", default="",
+                        help="comma-separated run labels (or setting/label) to run of the "
+                             "setting's list (default: all)")
     parser.add_argument("--objects", type=int, default=None,
                         help="first N objects of the hard set (default 6; regret 3)")
     parser.add_argument("--only", default="", help="comma-separated hard-set objects")
@@ -449,30 +462,61 @@ def main(argv=None) -> int:
     specs = [objects.make_object(n) for n in chosen]
     base = runner.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds, backend=args.backend)
     out = Path(args.out or f"runs/grasp_{args.setting}")
-    results = Path(args.results or f"experiments/results/{args.setting}")
+    results = Path(args.results or ("experiments/results" if args.setting == "ablations"
+                                    else f"experiments/results/{args.setting}"))
     results.mkdir(parents=True, exist_ok=True)
     command = "python -m experiments.grasp_learning " + shlex.join(argv)
     print(f"{command}\nmachine: {_machine_line()}", flush=True)
-    for label, config in runs_of(args.setting, base):
-        run_dir = out / label.replace("=", "_")
+    # the plan: (setting, label, config); "ablations" runs each distinct configuration of
+    # the four ablations once (alpha=0.05, core=dpp and loss=bce are the same run) and
+    # writes its per-seed file into every setting that lists it
+    if args.setting == "ablations":
+        plan = [(st, label, config) for st in ABLATIONS for label, config in runs_of(st, base)]
+    else:
+        plan = [(args.setting, label, config) for label, config in runs_of(args.setting, base)]
+    groups: dict[str, list] = {}
+    for st, label, config in plan:
+        groups.setdefault(config.fingerprint(), []).append((st, label, config))
+    if args.labels:
+        want = set(args.labels.split(","))
+        known = {x for g in groups.values() for st, lb, _ in g for x in (lb, f"{st}/{lb}")}
+        if want - known:
+            parser.error(f"--labels: {', '.join(sorted(want - known))} not in {sorted(known)}")
+        groups = {k: g for k, g in groups.items()
+                  if any(lb in want or f"{st}/{lb}" in want for st, lb, _ in g)}
+    for group in groups.values():
+        st0, label0, config = group[0]
+        run_dir = out / (f"{st0}.{label0}" if args.setting == "ablations" else label0
+                         ).replace("=", "_")
         if args.only:
             run_dir = run_dir.with_name(run_dir.name + "." + "+".join(chosen))
-        fname = _file_name(label, chosen, all_objects)
-        meta = {"label": label, "setting": args.setting, "objects": chosen,
-                "all_objects": all_objects, "config": dataclasses.asdict(config),
-                "command": command, "file": fname}
-        io.save_json(run_dir / "run_meta.json", meta)
+        fname = _file_name(label0, chosen, all_objects)
+        shared = [f"{st}/{lb}" for st, lb, _ in group]
+        targets = [{"file": (f"{st}/" if args.setting == "ablations" else "")
+                    + _file_name(lb, chosen, all_objects), "label": lb, "setting": st,
+                    "extra": {"same_run_as": shared} if len(group) > 1 else {}}
+                   for st, lb, _ in group]
+        io.save_json(run_dir / "run_meta.json", {
+            "label": label0, "setting": st0, "objects": chosen, "all_objects": all_objects,
+            "config": dataclasses.asdict(config), "command": command, "file": fname,
+            "targets": targets})
         t = time.perf_counter()
         res = runner.run(config, specs, run_dir, theta0=theta0,
                          progress=not args.no_progress)
         seconds = time.perf_counter() - t
-        doc = per_seed_doc(res["results"], label=label, setting=args.setting, objects=chosen,
-                           all_objects=all_objects, config=config, rounds_done=config.rounds,
-                           seconds=seconds, command=command, theta0=theta0,
-                           extra={"timings": res["timings"],
-                                  "trial_counts": res["trial_counts"]})
-        save_per_seed(results / fname, doc)
-        print(f"{label}: {seconds:.0f} s, wrote {results / fname}", flush=True)
+        for tg in targets:
+            doc = per_seed_doc(res["results"], label=tg["label"], setting=tg["setting"],
+                               objects=chosen, all_objects=all_objects, config=config,
+                               rounds_done=config.rounds, seconds=seconds, command=command,
+                               theta0=theta0, extra={"timings": res["timings"],
+                                                     "trial_counts": res["trial_counts"],
+                                                     **tg["extra"]})
+            (results / tg["file"]).parent.mkdir(parents=True, exist_ok=True)
+            save_per_seed(results / tg["file"], doc)
+            print(f"{tg['setting']}/{tg['label']}: {seconds:.0f} s, wrote "
+                  f"{results / tg['file']}", flush=True)
+    if args.setting == "ablations" or args.labels:
+        return 0
     if not args.only:
         s = summarise(results)
         for c in s["comparisons"].get("final_round", []):

@@ -9,6 +9,7 @@
 # where a JOB is NAME:CORES:LIMIT_S, NAME one of
 #   strong1 strong2 strong3   the 20-seed strong run, objects 1-2, 3-4, 5-6 of the hard set
 #   transfer-<cell>           one 20-round transfer cell (experiments.grasp_sensitivity)
+#   abl1 abl2 abl3 abl4       the ablations' distinct runs, in four parts
 #   paper alpha core_set loss schedule regret   a grasp_learning setting
 # e.g. strong1:0-3:560 transfer-A:12-13:560. The results' per-seed files name the command,
 # the machine and the seconds; this script only schedules them. (SMOKE="--objects 1 --seeds
@@ -52,6 +53,11 @@ for job in "$@"; do
     transfer-*) run "$name" "$cores" "$limit" python3 -m experiments.grasp_sensitivity \
                transfer-cell "${name#transfer-}" --out "$R/transfer" --seeds 5 --rounds 20 \
                --objects 3 ${SMOKE:-} ;;
+    abl1|abl2|abl3|abl4) labels=(x "alpha=0.01,alpha=0.05" "alpha=0.2,alpha=1.0"
+               "core=none,core=random" "loss=l1,schedule")
+             run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning ablations \
+               --labels "${labels[${name#abl}]}" --no-progress --out "$RUNS/ablations" \
+               --results "$R" ${SMOKE:-} ;;
     paper|alpha|core_set|loss|schedule|regret) run "$name" "$cores" "$limit" python3 -m \
                experiments.grasp_learning "$name" --no-progress --out "$RUNS/$name" \
                --results "$R/$name" ${SMOKE:-} ;;
@@ -63,7 +69,9 @@ wait
 python3 -m experiments.grasp_learning collect "$R/transfer/runs" "$R/transfer" \
   >> "$R/logs/collect.log" 2>&1
 for d in "$RUNS"/*; do
-  [ -d "$d" ] && python3 -m experiments.grasp_learning collect "$d" "$R/$(basename "$d")" \
+  dest="$R/$(basename "$d")"
+  [ "$(basename "$d")" = ablations ] && dest="$R"
+  [ -d "$d" ] && python3 -m experiments.grasp_learning collect "$d" "$dest" \
     >> "$R/logs/collect.log" 2>&1
 done
 echo "all jobs done after $(( $(date +%s) - T0 )) s" >> "$R/logs/jobs.txt"

@@ -256,7 +256,6 @@ def summarise(results_dir, write: bool = True) -> dict:
         if rg_names:
             comps["regret_total"] = _comparisons(rg_names, rg_diffs)
     summary = {
-        "results_dir": results_dir.name,
         "runs": runs,
         "reference": list(ref),
         "comparisons": comps,

@@ -83,7 +83,8 @@ def _arr(a) -> list:
 
 def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
                  all_objects: list[str], config, rounds_done: int, seconds: float,
-                 command: str, theta0, extra: dict | None = None) -> dict:
+                 command: str, theta0, extra: dict | None = None,
+                 trial_config=None) -> dict:
     """The per-seed record of one run: every figure per round, object, policy and seed
     (-1 = not measured: round 0's exploration, or regret accounting off), the command, the
     machine, θ0's digest and the trial configuration it was made with."""
@@ -101,7 +102,8 @@ def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
     doc.update({
         "config": dataclasses.asdict(config),
         "theta0_digest": theta0.fingerprint,
-        "trial_config": dataclasses.asdict(sim.TrialConfig()),
+        "trial_config": (trial_config if isinstance(trial_config, dict) else
+                         dataclasses.asdict(trial_config or sim.TrialConfig())),
         "command": command, "seconds": round(float(seconds), 1),
         "machine": io.machine(devices=True),
         "git_commit": io.run_metadata().get("git_commit"),
@@ -395,7 +397,8 @@ def collect(out, results) -> list[Path]:
                                objects=meta["objects"], all_objects=meta["all_objects"],
                                config=config, rounds_done=done,
                                seconds=meta.get("seconds", 0.0), command=meta["command"],
-                               theta0=theta0, extra={"stopped_early": True,
+                               theta0=theta0, trial_config=meta.get("trial_config"),
+                               extra={"stopped_early": True,
                                                      **meta.get("extra", {}),
                                                      **tg.get("extra", {})})
             target.parent.mkdir(parents=True, exist_ok=True)

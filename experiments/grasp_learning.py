@@ -72,7 +72,8 @@ def runs_of(setting: str, base):
     if setting == "schedule":
         return [("schedule", r(base, policies=("sern", "sern_log")))]
     if setting == "regret":
-        return [("regret", r(base, regret_trials=4, regret_grasps=5))]
+        return [("regret", r(base, regret_trials=base.regret_trials or 4,
+                             regret_grasps=base.regret_grasps or 5))]
     raise ValueError(f"unknown setting {setting!r}; choose from {SETTINGS}")
 
 
@@ -440,6 +441,10 @@ def main(argv=None) -> int:
                         help="per-seed results directory (default experiments/results/SETTING)")
     parser.add_argument("--backend", choices=("native", "mjx"), default="native",
                         help="trial physics: native MuJoCo (CPU) or MJX (GPU)")
+    parser.add_argument("--regret-trials", type=int, default=0,
+                        help="regret: oracle trials per candidate, each set (default 4)")
+    parser.add_argument("--regret-grasps", type=int, default=0,
+                        help="regret: oracle on the first G grasps of each phase (default 5)")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     num = args.objects if args.objects is not None else (3 if args.setting == "regret" else 6)
@@ -462,7 +467,12 @@ def main(argv=None) -> int:
             parser.error(f"--only: {', '.join(bad)} not in the hard set {all_objects}")
         chosen = [n for n in all_objects if n in chosen]
     specs = [objects.make_object(n) for n in chosen]
-    base = runner.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds, backend=args.backend)
+    try:
+        base = runner.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds,
+                                   backend=args.backend, regret_trials=args.regret_trials,
+                                   regret_grasps=args.regret_grasps)
+    except ValueError as exc:
+        parser.error(str(exc))
     out = Path(args.out or f"runs/grasp_{args.setting}")
     results = Path(args.results or ("experiments/results" if args.setting == "ablations"
                                     else f"experiments/results/{args.setting}"))

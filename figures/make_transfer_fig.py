@@ -66,8 +66,8 @@ def make_figure(results_dir: str | Path, out_png: str | Path) -> Path:
         axes[k // cols][k % cols].axis("off")
     axes[0][0].legend(fontsize=6, loc="lower right")
     fig.suptitle(f"Transfer: θ0 from world A learning online in world B; {len(a['objects'])} "
-                 f"objects pooled, mean over {a['seeds']} seeds, 95% t bands over seeds",
-                 fontsize=9)
+                 f"objects pooled, mean over {a['seeds']} seeds, 95% t bands over seeds\n"
+                 "(a band of zero width: every seed gave the same value)", fontsize=9)
     fig.tight_layout()
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)

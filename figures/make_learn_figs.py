@@ -144,8 +144,8 @@ def _plot(paper, lowvar, objects, policies, success_png: Path, paired_png: Path)
         ax.invert_yaxis()
         ax.set_xlabel(f"final-round success difference, percentage points ({label})")
         ax.set_title(f"Paired differences over {seeds} seeds (common random numbers), "
-                     "95% t intervals (unadjusted)",
-                     fontsize=9)
+                     "95% t intervals (unadjusted)\n(an interval of zero width: the same "
+                     "difference on every seed)", fontsize=9)
         fig.tight_layout()
         out.append(Path(paired_png))
         fig.savefig(out[-1], dpi=120, bbox_inches="tight")

@@ -19,7 +19,8 @@ command spreads over every core of a machine or over a cluster (issue 20):
   ``JAX_COMPILATION_CACHE_DIR`` (a persistent compilation cache, by default
   ``<run dir>/.jax_cache``, so a program compiles once per cluster, not once per worker),
   the CPU threads per task (``XLA_FLAGS`` intra-op threads, ``OMP_NUM_THREADS``, and
-  ``SERN_CPU_THREADS``, which :func:`sern_jax.executor.host_workers` honours), and
+  ``SERN_CPU_THREADS``, which :func:`sern_jax.executor.host_workers` honours; a CPU task
+  also pins its worker process to as many cores of its own: :func:`_pin_cores`), and
   ``JAX_PLATFORMS=cpu`` for tasks that ask for no GPU (so eight CPU tasks on a GPU machine
   do not each grab the GPU); tasks with ``gpus_per_task > 0`` ask Ray for ``num_gpus``.
 
@@ -78,6 +79,9 @@ class RayConfig:
       max_retries: how often Ray reruns a task whose worker died (killed, out of memory).
       spread: Ray's SPREAD scheduling (tasks spread over nodes rather than packed).
       cache_dir: JAX's persistent compilation cache; None: ``<run dir>/.jax_cache``.
+      pin_cores: CPU tasks pin their worker process to ``cpus_per_task`` cores of their own
+        (claimed per node by file locks), so that JAX's and XLA's threads of one task do not
+        spread over the cores other tasks run on.
     """
 
     address: str = LOCAL
@@ -87,6 +91,7 @@ class RayConfig:
     max_retries: int = 3
     spread: bool = False
     cache_dir: str | None = None
+    pin_cores: bool = True
 
     def __post_init__(self):
         if not isinstance(self.address, str) or not self.address.strip():
@@ -205,6 +210,8 @@ def worker_env(config: RayConfig, run_dir: str | os.PathLike) -> dict[str, str]:
         "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
         "MUJOCO_GL": os.environ.get("MUJOCO_GL", "disable"),
     }
+    if config.pin_cores and config.gpus_per_task == 0:
+        env["SERN_PIN_CORES"] = "1"
     if config.gpus_per_task > 0:
         if config.gpus_per_task < 1:  # several tasks share a GPU: no preallocation
             env["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
@@ -215,11 +222,63 @@ def worker_env(config: RayConfig, run_dir: str | os.PathLike) -> dict[str, str]:
     return env
 
 
-def _call_unit(fn: Callable[..., Any], args: tuple) -> float:
-    """The Ray task: runs one unit; returns its seconds."""
-    start = time.perf_counter()
+_PIN: dict[str, Any] = {}  # this worker process's claimed cores (lock fds, cores)
+
+
+def _pin_cores(threads: int) -> list[int] | None:
+    """Pins this worker process (every thread it has, and so the threads they start) to
+    ``threads`` cores no other pinned worker of this node holds, claimed by an exclusive
+    ``flock`` on ``<tmp>/sern-ray-cores/core-<i>`` for the life of the process (the kernel
+    releases it when the process dies). Called before the unit's first JAX call, so XLA's CPU
+    thread pool is sized to the claimed cores. None (unpinned) when too few cores are free."""
+    if "cores" in _PIN:
+        return _PIN["cores"]
+    import fcntl
+    import tempfile
+
+    lock_dir = Path(tempfile.gettempdir()) / "sern-ray-cores"
+    lock_dir.mkdir(exist_ok=True)
+    fds, cores = [], []
+    for core in sorted(os.sched_getaffinity(0)):
+        fd = os.open(lock_dir / f"core-{core}", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        fds.append(fd)
+        cores.append(core)
+        if len(cores) == threads:
+            break
+    if len(cores) < threads:
+        for fd in fds:
+            os.close(fd)
+        _PIN["cores"] = None
+        return None
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), cores)
+        except OSError:
+            pass
+    _PIN.update(cores=cores, fds=fds)
+    return cores
+
+
+def _call_unit(fn: Callable[..., Any], args: tuple) -> dict[str, Any]:
+    """The Ray task: runs one unit; returns its wall and CPU seconds and where it ran."""
+    cores = None
+    if os.environ.get("SERN_PIN_CORES") == "1" and hasattr(os, "sched_setaffinity"):
+        cores = _pin_cores(int(os.environ.get("SERN_CPU_THREADS", "1")))
+    start, cpu = time.perf_counter(), os.times()
     fn(*args)
-    return time.perf_counter() - start
+    end = os.times()
+    import socket
+
+    return {"seconds": time.perf_counter() - start,
+            "cpu_seconds": (end.user - cpu.user) + (end.system - cpu.system),
+            "threads": len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task")
+            else None,
+            "cores": cores, "pid": os.getpid(), "host": socket.gethostname()}
 
 
 def _one_line(text: str, limit: int = 300) -> str:
@@ -271,7 +330,9 @@ def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLi
       desc: the bar's label.
 
     Returns:
-      unit name -> seconds the task took (the last, successful attempt).
+      unit name -> what its task reported (the last, successful attempt): ``seconds``,
+      ``cpu_seconds`` (the worker process's user + system time over the unit), ``threads``
+      (the process's threads after it), ``cores`` (pinned cores or None), ``pid``, ``host``.
 
     Raises:
       UnitFailedError: a unit failed for good (one line); the others are cancelled, and every
@@ -300,7 +361,7 @@ def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLi
 
         bar = tqdm(total=len(units), unit=desc.rstrip("s") or "unit", desc="ray",
                    disable=not progress)
-        seconds: dict[str, float] = {}
+        seconds: dict[str, dict[str, Any]] = {}
         pending = list(refs)
         try:
             while pending:
@@ -308,7 +369,7 @@ def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLi
                 for ref in done:
                     unit = refs[ref]
                     try:
-                        seconds[unit.name] = float(ray.get(ref))
+                        seconds[unit.name] = ray.get(ref)
                     except Exception as exc:  # noqa: BLE001 - any task failure is one line
                         for other in pending:
                             ray.cancel(other)

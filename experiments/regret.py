@@ -390,8 +390,10 @@ def _ray_chunks(exp, todo, per_call: int, chunk_dir: Path, summary: bool, ray, r
     from sern_jax import distributed
 
     name = _summary_chunk_name if summary else _chunk_name
+    # an absolute path: a worker on another node does not start in this directory (the run
+    # directory must be on a filesystem every node sees at the same path: docs/CLUSTER.md)
     units = [distributed.Unit(name(policy, a, b), compute_chunk,
-                              (exp, policy, a, b, per_call, str(chunk_dir), summary))
+                              (exp, policy, a, b, per_call, str(chunk_dir.resolve()), summary))
              for policy, a, b in todo]
     distributed.run_units(units, ray, run_dir, log=log, progress=progress, desc="chunks")
 

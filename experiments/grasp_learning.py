@@ -85,12 +85,12 @@ def _arr(a) -> list:
 def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
                  all_objects: list[str], config, rounds_done: int, seconds: float,
                  command: str, theta0, extra: dict | None = None,
-                 trial_config=None) -> dict:
+                 trial_config=None, scene_config=None) -> dict:
     """The per-seed record of one run: every figure per round, object, policy and seed
     (-1 = not measured: round 0's exploration, or regret accounting off), the command, the
     machine, θ0's digest and the trial configuration it was made with."""
     from sern_jax import io
-    from sern_jax.grasp import sim
+    from sern_jax.grasp import scene, sim
 
     get = results._asdict() if hasattr(results, "_asdict") else dict(results)
     k = rounds_done + 1
@@ -105,6 +105,8 @@ def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
         "theta0_digest": theta0.fingerprint,
         "trial_config": (trial_config if isinstance(trial_config, dict) else
                          dataclasses.asdict(trial_config or sim.TrialConfig())),
+        "scene_config": (scene_config if isinstance(scene_config, dict) else
+                         dataclasses.asdict(scene_config or scene.SceneConfig())),
         "command": command, "seconds": round(float(seconds), 1),
         "machine": io.machine(devices=True),
         "git_commit": io.run_metadata().get("git_commit"),
@@ -399,6 +401,7 @@ def collect(out, results) -> list[Path]:
                                config=config, rounds_done=done,
                                seconds=meta.get("seconds", 0.0), command=meta["command"],
                                theta0=theta0, trial_config=meta.get("trial_config"),
+                               scene_config=meta.get("scene_config"),
                                extra={"stopped_early": True,
                                                      **meta.get("extra", {}),
                                                      **tg.get("extra", {})})

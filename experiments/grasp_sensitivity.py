@@ -274,13 +274,14 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
         "label": cell, "setting": "transfer", "objects": names, "all_objects": names,
         "config": dataclasses.asdict(config), "command": command, "file": f"{cell}.json",
         "theta0_dir": theta0_dir, "trial_config": dataclasses.asdict(trial),
+        "scene_config": dataclasses.asdict(ctx.scene),
         "extra": {"world": world_doc}})
     res = runner.run(config, specs, run_dir, theta0=theta0, progress=progress,
                      log=lambda *_: None, context_config=ctx, trial_config=trial)
     doc = grasp_learning.per_seed_doc(
         res["results"], label=cell, setting="transfer", objects=names, all_objects=names,
         config=config, rounds_done=rounds, seconds=time.perf_counter() - t0, command=command,
-        theta0=theta0, trial_config=trial,
+        theta0=theta0, trial_config=trial, scene_config=ctx.scene,
         extra={"world": world_doc, "timings": res["timings"],
                "trial_counts": res["trial_counts"]})
     grasp_learning.save_per_seed(out / f"{cell}.json", doc)

@@ -8,7 +8,8 @@
 #
 # where a JOB is NAME:CORES:LIMIT_S, NAME one of
 #   strong1 strong2 strong3   the 20-seed strong run, objects 1-2, 3-4, 5-6 of the hard set
-#   transfer-<cell>           one 20-round transfer cell (experiments.grasp_sensitivity)
+#   transfer-<cell>           one 20-round transfer cell (experiments.grasp_sensitivity;
+#                             5 seeds, the first TR_OBJECTS=3 objects of the hard set)
 #   abl1 abl2 abl3 abl4       the ablations' distinct runs, in four parts
 #   paper alpha core_set loss schedule regret   a grasp_learning setting
 # e.g. strong1:0-3:560 transfer-A:12-13:560. The results' per-seed files name the command,
@@ -52,7 +53,7 @@ for job in "$@"; do
                --results "$R/strong" ;;
     transfer-*) run "$name" "$cores" "$limit" python3 -m experiments.grasp_sensitivity \
                transfer-cell "${name#transfer-}" --out "$R/transfer" --seeds 5 --rounds 20 \
-               --objects 3 ${SMOKE:-} ;;
+               --objects ${TR_OBJECTS:-3} ${SMOKE:-} ;;
     abl1|abl2|abl3|abl4) labels=(x "alpha=0.01,alpha=0.05" "alpha=0.2,alpha=1.0"
                "core=none,core=random" "loss=l1,schedule")
              run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning ablations \

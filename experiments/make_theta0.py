@@ -4,6 +4,10 @@ The same steps as ``sern grasp dataset``, ``sern grasp pretrain`` and ``sern gra
 with their defaults, in one process (used to make ``sern_jax/grasp/data/`` on one machine).
 
     python -m experiments.make_theta0 --out runs/theta0 [--objects 200 --poses 16]
+
+The manifest it leaves in ``OUT/theta0`` also records how it was made: this command, the
+equivalent ``sern grasp`` commands, the seeds, the machine, the simulated world
+(``sim.physics_settings()``: the gripper and the trial) and the seconds of each step.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ def main(argv=None) -> int:
     parser.add_argument("--epochs", type=int, default=8)
     parser.add_argument("--screen-poses", type=int, default=8)
     parser.add_argument("--screen-trials", type=int, default=16)
+    parser.add_argument("--fresh-trials", type=int, default=None,
+                        help="trials that value each pose's chosen best candidate, "
+                             "independent of the screening trials (default: as many)")
     parser.add_argument("--heldout-objects", type=int, default=12)
     parser.add_argument("--heldout-poses", type=int, default=4)
     parser.add_argument("--heldout-trials", type=int, default=16)
@@ -53,16 +60,54 @@ def main(argv=None) -> int:
     t = time.perf_counter()
     specs = [objects.make_object(n) for n in objects.object_names()]
     rows = pretrain.screen(theta0.network, theta0.params, specs, args.screen_poses,
-                           args.screen_trials, progress=not args.no_progress)
+                           args.screen_trials, progress=not args.no_progress,
+                           fresh_trials=args.fresh_trials)
     timings["screen_s"] = time.perf_counter() - t
+    host = io.run_metadata()["host"]
+    screen_settings = {"poses": args.screen_poses, "trials": args.screen_trials,
+                       "fresh_trials": args.fresh_trials or args.screen_trials, "seed": 0}
     io.save_json(out / "theta0" / "screen.json", {"rule": pretrain.HARD_RULE, "objects": rows,
-                                                   "timings": timings,
-                                                   "machine": io.run_metadata()["host"]})
+                                                   "settings": screen_settings,
+                                                   "timings": timings, "machine": host})
     for r in rows:
         print(f"{r['object']:>20s} greedy {r['greedy_success']:.2f} best {r['best_success']:.2f} "
-              f"mean {r['mean_success']:.2f} {'HARD' if r['hard'] else ''}", flush=True)
+              f"best fresh {r['best_success_fresh']:.2f} mean {r['mean_success']:.2f} "
+              f"{'HARD' if r['hard'] else ''}", flush=True)
     print(json.dumps(timings))
+    _record(out / "theta0", argv, args, summary, timings, screen_settings, host)
     return 0
+
+
+def _record(theta_dir: Path, argv, args, summary, timings, screen_settings, host) -> None:
+    """Adds how the artefacts were made to the manifest (θ0's sha256 is unchanged)."""
+    import sys
+
+    import jax
+    import mujoco
+
+    from sern_jax import io
+    from sern_jax.grasp import scene, sim
+
+    path = theta_dir / "manifest.json"
+    manifest = io.load_json(path)
+    flags = " ".join(argv if argv is not None else sys.argv[1:])
+    manifest.update({
+        "command": f"python -m experiments.make_theta0 {flags}".strip(),
+        "equivalent_commands": [
+            f"sern grasp dataset --out runs/d0 --objects {args.objects} --poses {args.poses}",
+            "sern grasp pretrain --data runs/d0 --out runs/theta0 --install "
+            f"--screen-poses {args.screen_poses} --screen-trials {args.screen_trials}"],
+        "seeds": {"dataset": 0, "pretrain": 0, "screen": 0,
+                  "heldout": manifest["heldout"].get("heldout_seed")},
+        "gripper": scene.GRIPPER,
+        "physics": sim.physics_settings(),
+        "screen": screen_settings,
+        "machine": {**host, "jax": jax.__version__, "jax_backend": jax.default_backend(),
+                    "mujoco": mujoco.__version__},
+        "timings_s": {k: round(v, 1) for k, v in timings.items()},
+        "d0_summary": summary,
+    })
+    io.save_json(path, manifest)
 
 
 if __name__ == "__main__":

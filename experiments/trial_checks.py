@@ -4,15 +4,22 @@
   step (5 ms) and at half and a quarter of it (``sim.refine``: the same physical schedule
   in 2x / 4x as many steps); the fraction of trials whose outcome (success or failure)
   agrees with the default step's, with Clopper–Pearson 95 % intervals. Target: >= 95 %.
-* ``grip``: the same trials with 6 N per finger (the default) and with stronger grips
-  (20 N, 40 N): how many outcomes flip, in each direction, and the success rates.
+* ``grip``: the same trials with the default grip (``SceneConfig().finger_force``: 20 N
+  per finger since 2026-11-24, a Robotiq 2F-85 at its lowest setting) and with other
+  grips (``--forces``, default 6 N, the trial before, and 40 N): how many outcomes flip,
+  in each direction, and the success rates, overall and per object.
 
-The fixed set: the hard set's objects (``artifacts.hard_set``), ``--poses`` resting poses
-each (``context.make_contexts`` with key ``fold_in(key(seed), object index)``), up to
-``--candidates`` valid candidates per pose drawn without replacement (numpy
-``default_rng([seed, object, pose])``), one randomised trial each (``sim.sample_noise`` with
-key ``fold_in(fold_in(key(seed), object index), 1)``): common random numbers across
-settings, so each trial is paired with itself.
+The fixed set: ``--objects`` (default: the six objects of the first check, which were
+the hard set of the 6 N θ0, and the five solid-steel industrial parts), ``--poses``
+resting poses each (``context.make_contexts`` with key ``fold_in(key(seed), object
+index)``), up to ``--candidates`` valid candidates per pose drawn without replacement
+(numpy ``default_rng([seed, object, pose])``), one randomised trial each
+(``sim.sample_noise`` with key ``fold_in(fold_in(key(seed), object index), 1)``): common
+random numbers across settings, so each trial is paired with itself. The first six
+objects use the seeds of the 6 N check (``experiments/results/trial_checks_6N.json``), but
+their resting poses, and so the grasps, differ from it: the drop that makes a resting pose
+runs with the scene's solver settings, which changed with the grip (20 / 20 Newton
+iterations). Contexts are made with the default scene; only the trials change setting.
 
     python -m experiments.trial_checks --out experiments/results/trial_checks.json
 """
@@ -28,14 +35,17 @@ import time
 import numpy as np
 
 
-def fixed_trials(num_objects: int, poses: int, candidates: int, seed: int):
+DEFAULT_OBJECTS = ("triangular_prism", "pipe_tee", "tless_part_a", "handle_jug",
+                   "tless_part_b", "tless_part_c", "pipe_tee_steel", "bracket_steel",
+                   "tless_part_a_steel", "tless_part_b_steel", "tless_part_c_steel")
+
+
+def fixed_trials(names, poses: int, candidates: int, seed: int):
     """[(spec, grasps [n, 4], object poses [n, 7], TrialNoise [n])] per object."""
     import jax
 
-    from sern_jax.grasp import artifacts, context, objects, sim
+    from sern_jax.grasp import context, objects, sim
 
-    theta0 = artifacts.load_theta0()
-    names = artifacts.hard_set(theta0, num_objects)["objects"]
     root = jax.random.key(seed)
     out = []
     for o, name in enumerate(names):
@@ -86,66 +96,93 @@ def _agree(a, b) -> dict:
             "a_only": int(np.sum(a & ~b)), "b_only": int(np.sum(~a & b))}
 
 
+def _per_object(sizes, names, *outs) -> dict:
+    edges = np.cumsum([0] + list(sizes))
+    return {n: [float(o[edges[i]:edges[i + 1]].mean()) for o in outs]
+            for i, n in enumerate(names)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--objects", type=int, default=6)
+    ap.add_argument("--objects", default=",".join(DEFAULT_OBJECTS),
+                    help="comma-separated object names")
     ap.add_argument("--poses", type=int, default=4)
     ap.add_argument("--candidates", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--forces", default="20,40", help="grips to compare with 6 N (newtons)")
+    ap.add_argument("--forces", default="6,40",
+                    help="grips (newtons per finger) to compare with the default")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    for name in ("objects", "poses", "candidates"):
+    for name in ("poses", "candidates"):
         if getattr(args, name) < 1:
             ap.error(f"--{name} must be >= 1")
-    forces = [float(f) for f in args.forces.split(",") if f]
+    names = [n for n in args.objects.split(",") if n]
+    try:
+        forces = [float(f) for f in args.forces.split(",") if f]
+    except ValueError:
+        ap.error(f"--forces must be comma-separated numbers, got {args.forces!r}")
+    if any(not (f > 0) for f in forces):
+        ap.error("--forces must be > 0")
+    from sern_jax.grasp import objects as objects_lib
+
+    if not names:
+        ap.error("--objects must name at least one object")
+    for n in names:
+        try:
+            objects_lib.make_object(n)
+        except ValueError:
+            ap.error(f"--objects: unknown object {n!r}")
 
     from sern_jax import io
+    from sern_jax.grasp import scene, sim
 
+    default_force = scene.SceneConfig().finger_force
     t0 = time.perf_counter()
-    trials = fixed_trials(args.objects, args.poses, args.candidates, args.seed)
+    trials = fixed_trials(names, args.poses, args.candidates, args.seed)
     sizes = [len(t[1]) for t in trials]
     base = outcomes(trials, 1, threads=args.threads)
-    times = {}
-    res = {"objects": [t[0].name for t in trials], "trials_per_object": sizes,
-           "default_success": float(base.mean()), "timestep": {}, "grip": {}}
+    res = {"objects": names, "trials_per_object": sizes,
+           "default_force_N": default_force, "gripper": scene.GRIPPER,
+           "physics": sim.physics_settings(),
+           "default_success": float(base.mean()),
+           "default_success_per_object": _per_object(sizes, names, base),
+           "timestep": {}, "grip": {}}
     by_dt = {1: base}
     for k in (2, 4):
-        t = time.perf_counter()
         by_dt[k] = outcomes(trials, k, threads=args.threads)
-        times[f"dt/{k}"] = time.perf_counter() - t
         res["timestep"][f"5ms_vs_{5 / k:g}ms"] = _agree(base, by_dt[k])
     res["timestep"]["2.5ms_vs_1.25ms"] = _agree(by_dt[2], by_dt[4])
     res["timestep"]["success"] = {f"{5 / k:g}ms": float(v.mean()) for k, v in by_dt.items()}
+    res["timestep"]["success_per_object"] = _per_object(sizes, names, *by_dt.values())
     for f in forces:
         out_f = outcomes(trials, 1, finger_force=f, threads=args.threads)
         row = _agree(base, out_f)
         row["success"] = float(out_f.mean())
-        row["fail_at_6N_success_at_f"] = row.pop("b_only")
-        row["success_at_6N_fail_at_f"] = row.pop("a_only")
-        # per object: where the flips are
-        edges = np.cumsum([0] + sizes)
-        row["per_object_success"] = {
-            t[0].name: [float(base[edges[i]:edges[i + 1]].mean()),
-                        float(out_f[edges[i]:edges[i + 1]].mean())]
-            for i, t in enumerate(trials)}
+        row["fail_at_default_success_at_f"] = row.pop("b_only")
+        row["success_at_default_fail_at_f"] = row.pop("a_only")
+        # per object: [success at the default grip, success at f]
+        row["per_object_success"] = _per_object(sizes, names, base, out_f)
         res["grip"][f"{f:g}N"] = row
     res["seconds"] = round(time.perf_counter() - t0, 1)
     res["command"] = "python -m experiments.trial_checks " + " ".join(
         argv if argv is not None else sys.argv[1:])
     res["machine"] = {"platform": platform.platform(), "cpu_count": os.cpu_count(),
                       "load_average": os.getloadavg()}
+    print(f"default grip {default_force:g} N: success {100 * res['default_success']:.1f} % "
+          f"of {len(base)} trials")
+    for n, (v,) in res["default_success_per_object"].items():
+        print(f"  {n:>20s} {100 * v:5.1f} %")
     for k, v in res["timestep"].items():
         if "agree" in v:
             print(f"time step {k}: {v['agree']}/{v['n']} agree ({100 * v['fraction']:.1f} %, "
                   f"95 % CI {100 * v['ci95'][0]:.1f}-{100 * v['ci95'][1]:.1f} %)")
     print("success by step:", res["timestep"]["success"])
     for k, v in res["grip"].items():
-        print(f"6 N vs {k}: success {100 * res['default_success']:.1f} % -> "
-              f"{100 * v['success']:.1f} %; {v['fail_at_6N_success_at_f']} failures become "
-              f"successes, {v['success_at_6N_fail_at_f']} successes become failures "
-              f"(of {v['n']})")
+        print(f"{default_force:g} N vs {k}: success {100 * res['default_success']:.1f} % -> "
+              f"{100 * v['success']:.1f} %; {v['fail_at_default_success_at_f']} failures "
+              f"become successes, {v['success_at_default_fail_at_f']} successes become "
+              f"failures (of {v['n']})")
     if args.out:
         io.save_json(args.out, res)
         print(f"wrote {args.out} ({res['seconds']:.0f} s)")

@@ -100,7 +100,7 @@ def test_fixed_pose_evaluation_noise():
 
 
 def test_trial_checks():
-    d = json.loads((RESULTS / "trial_checks.json").read_text())
+    d = json.loads((RESULTS / "trial_checks_6N.json").read_text())
     ts = d["timestep"]
     assert (ts["5ms_vs_2.5ms"]["agree"], ts["5ms_vs_2.5ms"]["n"]) == (376, 384)
     assert _pct(ts["5ms_vs_2.5ms"]["fraction"]) == 97.9

@@ -48,6 +48,7 @@ MANIFEST_FILE = "manifest.json"
 SCREEN_FILE = "screen.json"
 FILES = (THETA0_FILE, CORE_FILE, MANIFEST_FILE, SCREEN_FILE)
 CORE_SET_KINDS = ("dpp", "random", "none")
+HARD_BEST_FLOOR = 0.8  # = pretrain.HARD_RULE["min_best_success"] (pretrain imports this module)
 
 
 class Theta0(NamedTuple):
@@ -159,11 +160,13 @@ def install(src_dir: str | Path, dst_dir: str | Path = DATA_DIR) -> Path:
 def hard_set(theta0: Theta0, num: int = 6) -> dict:
     """The objects the online experiments use, from the screen shipped with θ0.
 
-    The rule (``pretrain.HARD_RULE``): θ0's greedy choice succeeds at most 60 % of the time
-    while the best candidate succeeds at least 80 %. When fewer than ``num`` objects meet it,
+    The rule (``pretrain.HARD_RULE``, :func:`pretrain.is_hard`): θ0's greedy choice succeeds
+    at most 60 % of the time while the chosen best candidate succeeds at least 80 % on fresh
+    trials, independent of those that chose it. When fewer than ``num`` objects meet it,
     the set is filled with the objects of lowest θ0 greedy success among those whose best
-    candidate succeeds at least 80 % (so there is something to learn), and
-    ``meets_rule`` says which ones are which.
+    candidate succeeds at least 80 % on the fresh trials (so there is something to learn),
+    and ``meets_rule`` says which ones are which. A screen made before the fresh trials
+    (rows without ``best_success_fresh``) is read with its biased ``best_success``.
 
     Returns:
       {"objects": [names], "meets_rule": [bools], "rows": [screen rows of those objects]}.
@@ -171,7 +174,9 @@ def hard_set(theta0: Theta0, num: int = 6) -> dict:
     if not theta0.screen:
         raise ValueError("this θ0 has no screen.json: run `sern grasp screen --json-out "
                          "DIR/screen.json` for its directory, or name the objects")
-    rows = [r for r in theta0.screen["objects"] if r["best_success"] >= 0.8]
+    floor = HARD_BEST_FLOOR
+    rows = [r for r in theta0.screen["objects"]
+            if r.get("best_success_fresh", r["best_success"]) >= floor]
     rows.sort(key=lambda r: (not r["hard"], r["greedy_success"], r["object"]))
     chosen = rows[:num]
     return {"objects": [r["object"] for r in chosen],

@@ -114,8 +114,11 @@ class DatasetConfig:
         return self.num_objects * self.poses_per_object * 64
 
     def fingerprint(self) -> str:
-        """Hash of everything that determines the shards (not the backend's speed)."""
+        """Hash of everything that determines the shards (not the backend's speed): this
+        config and the simulated world it is labelled in (``sim.physics_settings()``: the
+        default scene and trial), so a D0 made under another trial is another dataset."""
         d = dataclasses.asdict(self)
+        d["physics"] = sim_lib.physics_settings()
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -250,6 +253,7 @@ def generate(
 def _generate(config, out_dir: Path, specs, progress: bool, log) -> dict:
     io.save_json(out_dir / "config.json",
                  {"config": config, "fingerprint": config.fingerprint(),
+                  "physics": sim_lib.physics_settings(),
                   "label": "one Bernoulli outcome per valid candidate (first trial); "
                            "successes = count over trials_per_grasp"})
     root = jax.random.key(config.seed)
@@ -302,6 +306,13 @@ def load(out_dir: str | Path) -> tuple[DatasetConfig, dict[str, np.ndarray]]:
         raise ValueError(f"{cfg_path} is unreadable or not a dataset's config "
                          f"({type(exc).__name__}); rerun `sern grasp dataset` with the flags "
                          "that made it") from None
+    stored = io.load_json(cfg_path).get("fingerprint")
+    if stored != config.fingerprint():
+        raise ValueError(
+            f"{out_dir} was labelled in another simulated world (fingerprint {stored}, this "
+            f"code's trial gives {config.fingerprint()}: the gripper or trial settings "
+            "changed, e.g. the 20 N default of 2026-11-24); regenerate it with `sern grasp "
+            "dataset --out NEW_DIR`")
     paths = shard_paths(out_dir, config)
     missing = [p.name for p in paths if not p.exists()]
     if missing:

@@ -44,6 +44,8 @@ __all__ = [
     "MAX_MASS_KG",
     "MAX_MESH_VERTICES",
     "POPULATION_KINDS",
+    "HARD_SET",
+    "STEEL_DENSITY",
     "GeomSpec",
     "ObjectSpec",
     "quat_to_mat",
@@ -484,6 +486,23 @@ def _tless_part_c() -> ObjectSpec:
     return ObjectSpec("tless_part_c", (_mesh(pts), tab), 0.18, "hard", "industrial")
 
 
+STEEL_DENSITY = 7850.0  # kg/m³: the solid-steel variants of the industrial parts
+
+
+def _steel(make: Callable[[], ObjectSpec]) -> Callable[[], ObjectSpec]:
+    """The same part in solid steel (7.85 g/cm³; 1.8-2.8x the plastic-like default mass):
+    heavier, so grasps far from its centre of mass twist out under a real gripper's
+    force (the 20 N default) rather than under a weak grip."""
+
+    def spec() -> ObjectSpec:
+        base = make()
+        return dataclasses.replace(base, name=f"{base.name}_steel",
+                                   mass=round(STEEL_DENSITY * base.volume, 3),
+                                   kind=f"{base.kind}_steel")
+
+    return spec
+
+
 _HARD = {
     "triangular_prism": _triangular_prism,
     "round_stapler": _round_stapler,
@@ -496,6 +515,11 @@ _HARD = {
     "tless_part_a": _tless_part_a,
     "tless_part_b": _tless_part_b,
     "tless_part_c": _tless_part_c,
+    "pipe_tee_steel": _steel(_pipe_tee),
+    "bracket_steel": _steel(_bracket),
+    "tless_part_a_steel": _steel(_tless_part_a),
+    "tless_part_b_steel": _steel(_tless_part_b),
+    "tless_part_c_steel": _steel(_tless_part_c),
 }
 
 # ----------------------------------------------------------------------------- population
@@ -662,6 +686,15 @@ _NAMED = {
         _primitive("handle", np.full(10, 0.5), "handle", 0.1)
     ),
 }
+
+
+# The shipped hard set: ``artifacts.hard_set(load_theta0())`` of the θ0 and screen shipped
+# on 2026-11-24 (20 N trial). Only triangular_prism meets the rule (θ0 greedy <= 0.6, best
+# candidate on fresh trials >= 0.8); the other five fill the set by lowest θ0 greedy
+# success among objects whose fresh best candidate succeeds >= 0.8. A test checks that
+# the shipped screen still gives exactly this set.
+HARD_SET = ("triangular_prism", "tless_part_a", "detergent_bottle", "tless_part_a_steel",
+            "pipe_tee_steel", "tless_part_b_steel")
 
 
 def object_names() -> tuple[str, ...]:

@@ -34,6 +34,8 @@ from sern_jax.grasp import crops as crops_lib
 from sern_jax.grasp import dataset as dataset_lib
 from sern_jax.grasp import objects as objects_lib
 from sern_jax.grasp import quality_net as qn
+from sern_jax.grasp import scene as scene_lib
+from sern_jax.grasp import sim as sim_lib
 
 __all__ = [
     "PretrainConfig",
@@ -486,9 +488,12 @@ def _pretrain(config, data_config, arrays, out_dir, ckpt, fingerprint, val, tr,
     manifest = {
         "made_by": "sern grasp dataset, then sern grasp pretrain",
         "dataset": {"config": dataclasses.asdict(data_config),
+                    "fingerprint": data_config.fingerprint(),
                     "labelled_grasps": int(len(label)),
                     "positive_fraction": float(label.mean())},
         "pretrain": dataclasses.asdict(config),
+        "gripper": scene_lib.GRIPPER,
+        "physics": sim_lib.physics_settings(),  # the world D0 was labelled in
         "history": history,
         "heldout": {k2: v for k2, v in metrics.items() if k2 != "reliability"},
         "core_set": {"k": k, "method": config.core_method,

@@ -434,10 +434,13 @@ def _finite_list(values) -> list:
 def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
                     theta0) -> str:
     """What determines a run's results: the config, the objects (names and geometry, so
-    the same mesh file at another scale is another run) and θ0."""
+    the same mesh file at another scale is another run), θ0, and the default simulated
+    world (``sim.physics_settings()``: a change of the default trial, e.g. 6 N -> 20 N
+    fingers on 2026-11-24, is another run; a non-default world is hashed on top in
+    :func:`run`)."""
     objects = [(s.name, repr(s)) for s in specs]
     text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(objects)
-            + theta0.fingerprint)
+            + theta0.fingerprint + json.dumps(sim_lib.physics_settings(), sort_keys=True))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

@@ -25,7 +25,8 @@ which ``mujoco.rollout`` stops the trial) is flagged ``nan`` and is never a succ
 Randomisation (why outcomes are Bernoulli), drawn per trial by :func:`sample_noise`:
 
 * friction: sliding friction of the object's geoms ~ U[0.3, 0.8] (pads 0.3, table 0.5;
-  MuJoCo takes the larger of a pair, so this is the pad-object and object-table value);
+  MuJoCo takes the larger of a pair, so this is the pad-object and object-table value,
+  for draws of at least 0.3 and 0.5 respectively);
 * mass: object mass (and inertia) scaled by U[0.8, 1.25];
 * execution error of the grasp pose: x, y, z ~ N(0, 2 mm), θ ~ N(0, 0.05 rad), each
   truncated at 2.5 σ.
@@ -80,6 +81,7 @@ __all__ = [
     "sample_noise",
     "zero_noise",
     "refine",
+    "physics_settings",
     "make_execute",
     "GraspSimulator",
     "agreement",
@@ -164,6 +166,19 @@ class TrialConfig:
             + self.shake_steps
             + self.hold_steps
         )
+
+
+def physics_settings(scene: scene_lib.SceneConfig | None = None,
+                     trial: TrialConfig | None = None) -> dict:
+    """The simulated world as plain data: the scene (gripper force, frictions, solver,
+    step) and the trial (schedule, randomisation). Every run directory's fingerprint
+    (D0, θ0, ``sern grasp learn``) includes it, so runs under different trials (e.g.
+    the 6 N trial before 2026-11-24 and the 20 N one after) never share a directory.
+    None = the defaults."""
+    sc = dataclasses.asdict(scene or scene_lib.SceneConfig())
+    tr = dataclasses.asdict(trial or TrialConfig())
+    return {"scene": sc, "trial": {k: (list(v) if isinstance(v, tuple) else v)
+                                   for k, v in tr.items()}}
 
 
 def refine(config: TrialConfig, factor: int) -> TrialConfig:

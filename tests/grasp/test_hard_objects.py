@@ -28,7 +28,13 @@ def test_hard_object_limits(name):
     spec = objects.make_object(name)
     assert max(spec.extents) <= 0.11  # the 10 cm class
     assert min(spec.extents) >= 0.02
-    assert objects.MIN_MASS_KG <= spec.mass <= objects.MAX_MASS_KG
+    if name.endswith("_steel"):  # the same part in solid steel: heavier than the population
+        base = objects.make_object(name.removesuffix("_steel"))
+        assert spec.geoms == base.geoms and spec.mass > base.mass
+        assert spec.mass == pytest.approx(objects.STEEL_DENSITY * spec.volume, abs=1e-3)
+        assert spec.mass <= 0.6
+    else:
+        assert objects.MIN_MASS_KG <= spec.mass <= objects.MAX_MASS_KG
     for g in spec.geoms:
         assert len(g.vertices) <= 32
 
@@ -70,3 +76,21 @@ def test_summary_uses_the_fresh_best_for_the_screen():
     assert not s["screen_candidate"]
     s_good = screen.summarise([dict(r, best_fresh=0.9) for r in recs])
     assert s_good["frac_poses_best_fresh_ge_0.8"] == 1.0 and s_good["screen_candidate"]
+
+
+def test_shipped_hard_set_is_what_the_shipped_screen_gives():
+    from sern_jax.grasp import artifacts, pretrain
+
+    theta0 = artifacts.load_theta0()
+    hs = artifacts.hard_set(theta0)
+    assert tuple(hs["objects"]) == objects.HARD_SET
+    rows = {r["object"]: r for r in theta0.screen["objects"]}
+    # the screen valued every best candidate on fresh trials, and the rule used them
+    for r in rows.values():
+        assert "best_success_fresh" in r and r["hard"] == pretrain.is_hard(r)
+    meets = [n for n, r in rows.items() if r["hard"]]
+    assert hs["meets_rule"] == [n in meets for n in hs["objects"]]
+    # the fill: lowest θ0 greedy success among the rest whose fresh best is >= 0.8
+    rest = sorted((r["greedy_success"], n) for n, r in rows.items()
+                  if not r["hard"] and r["best_success_fresh"] >= 0.8)
+    assert [n for n in hs["objects"] if n not in meets] == [n for _, n in rest][:6 - len(meets)]

@@ -13,7 +13,9 @@ def test_named_objects_are_sane(name):
     assert spec.name == name
     ext = np.asarray(spec.extents)
     assert 0.01 <= ext.min() and ext.max() <= 0.105, ext
-    assert objects.MIN_MASS_KG <= spec.mass <= objects.MAX_MASS_KG
+    # solid-steel parts (7.85 g/cm³) may exceed the population's 500 g, up to 600 g
+    top = 0.6 if name.endswith("_steel") else objects.MAX_MASS_KG
+    assert objects.MIN_MASS_KG <= spec.mass <= top
     for g in spec.geoms:
         assert g.type in ("box", "sphere", "capsule", "mesh")
         assert len(g.vertices) <= objects.MAX_MESH_VERTICES

@@ -18,6 +18,11 @@ the candidate sampling are drawn from ``fold_in(key_i, POSE_STREAM)``,
 resting pose is simulated by native MuJoCo (``scene.resting_pose``, an int seed): the
 seed is 31 random bits of the pose stream.
 
+Threads: the resting poses of a batch (native MuJoCo, which releases the GIL while it steps)
+settle in a thread pool of :func:`context_threads` threads, each pose in its own ``MjData``
+with its own seed, so the poses, and everything computed from them, are the serial ones bit
+for bit (tested); ``SERN_CONTEXT_THREADS=1`` settles them one after another.
+
 Compiled code: one jitted ``render + sample`` function per (camera, candidate, noise)
 configuration, cached at module level, so calls with the same configuration, the same
 number of poses and scenes of the same structure never recompile. (The ray caster reads the
@@ -27,8 +32,11 @@ structure -- another geom type, another mesh -- is traced once more on first use
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
+import os
+import threading
 from typing import NamedTuple
 
 import jax
@@ -55,6 +63,7 @@ __all__ = [
     "make_contexts",
     "scene_model",
     "copy_model",
+    "context_threads",
 ]
 
 POSE_STREAM = 0  # fold_in id: resting-pose seed
@@ -233,6 +242,47 @@ def _geom_poses(model: mujoco.MjModel, poses: np.ndarray) -> depth_lib.GeomPoses
     return depth_lib.GeomPoses(geom_xpos=xpos, geom_xmat=xmat)
 
 
+def context_threads() -> int:
+    """Threads that settle the resting poses of one batch: ``SERN_CONTEXT_THREADS`` where
+    set, else ``SERN_CPU_THREADS`` (a Ray task's share: ``sern_jax.distributed``), else the
+    cores this process may use."""
+    for name in ("SERN_CONTEXT_THREADS", "SERN_CPU_THREADS"):
+        value = os.environ.get(name, "").strip()
+        if value.isdigit() and int(value) >= 1:
+            return int(value)
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+_POOLS: dict[int, concurrent.futures.ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(threads: int) -> concurrent.futures.ThreadPoolExecutor:
+    with _POOLS_LOCK:
+        if threads not in _POOLS:
+            _POOLS[threads] = concurrent.futures.ThreadPoolExecutor(
+                threads, thread_name_prefix="sern-context")
+        return _POOLS[threads]
+
+
+def _resting_poses(model: mujoco.MjModel, seeds: np.ndarray, config: ContextConfig
+                   ) -> np.ndarray:
+    """``scene.resting_pose`` of every seed [P] -> poses [P, 7], in threads (same values:
+    each pose has its own MjData and seed; the model is only read)."""
+
+    def one(seed):
+        return scene_lib.resting_pose(
+            model, int(seed), config.scene.xy_jitter, config.scene.settle_steps)
+
+    threads = min(len(seeds), context_threads())
+    if threads <= 1 or threading.current_thread().name.startswith("sern-context"):
+        return np.stack([one(s) for s in seeds])
+    return np.stack(list(_pool(threads).map(one, seeds)))  # in order; first error raised
+
+
 def _contexts(
     keys: jax.Array,
     model: mujoco.MjModel,
@@ -240,15 +290,7 @@ def _contexts(
 ) -> tuple[np.ndarray, np.ndarray, depth_lib.CameraParams, cand_lib.Candidates]:
     """Poses, depth, camera and candidates for context keys [P] in one scene."""
     seeds, keys_noise, keys_cand = _streams(keys)
-    seeds = np.asarray(seeds)
-    poses = np.stack(
-        [
-            scene_lib.resting_pose(
-                model, int(s), config.scene.xy_jitter, config.scene.settle_steps
-            )
-            for s in seeds
-        ]
-    )
+    poses = _resting_poses(model, np.asarray(seeds), config)
     params = depth_lib.overhead_params(config.camera)
     if _renderer(config) == "native":
         # MuJoCo's C ray caster: the same image as depth.render (tests compare them) with

@@ -96,6 +96,32 @@ def test_executor_host_workers_honours_the_task_share(monkeypatch):
     assert executor.host_workers() == len(os.sched_getaffinity(0))
 
 
+def test_cluster_doc_quotes_the_committed_scaling_runs():
+    """Every figure of docs/CLUSTER.md's D0 table, recomputed from the committed JSON files."""
+    import json
+
+    doc = (ROOT / "docs" / "CLUSTER.md").read_text()
+    results = ROOT / "experiments" / "results" / "ray_scaling"
+    for name in ("d0_weak_pinned_h100host.json", "d0_weak_unpinned_h100host.json"):
+        data = json.loads((results / name).read_text())
+        assert data["shards_identical_across_worker_counts"]
+        assert data["machine"]["cpu_count"] == 16
+        runs = {r["workers"]: r for r in data["runs"]}
+        assert sorted(runs) == [1, 4, 8]
+        for n, r in runs.items():
+            assert r["objects"] == 6 * n and r["poses"] == 16
+            assert r["efficiency"] == pytest.approx(runs[1]["seconds"] / r["seconds"])
+            assert f"{r['seconds']:.1f} s, " in doc, (name, n)
+            assert f"{r['efficiency']:.2f}" in doc, (name, n)
+        assert f"{runs[1]['seconds'] / 6:.1f} s per object" in doc
+        assert f"{runs[8]['objects_per_second']:.2f}" in doc
+    pinned = json.loads((results / "d0_weak_pinned_h100host.json").read_text())["runs"]
+    one = pinned[0]
+    assert one["task_cpu_seconds_sum"] == pytest.approx(one["task_seconds_sum"], rel=0.01)
+    assert f"{one['task_seconds_min_median_max'][1]:.1f} s" in doc
+    assert f"{pinned[2]['task_seconds_min_median_max'][1]:.1f} s" in doc
+
+
 # ----------------------------------------------------------------------- on a local Ray
 
 @pytest.fixture(scope="module")
@@ -158,6 +184,41 @@ def test_regret_summaries_on_ray_equal_single_process(local_ray, tmp_path):
     assert main(flags + ["--out", str(one)]) == 0
     assert main(flags + ["--ray", "--out", str(par)]) == 0
     _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+
+
+def test_dataset_on_ray_equals_single_process_and_resumes(local_ray, tmp_path):
+    from sern_jax.grasp import dataset
+
+    config = dataset.DatasetConfig(num_objects=3, poses_per_object=2, objects_per_shard=1)
+    one, par = tmp_path / "one", tmp_path / "ray"
+    logs: list[str] = []
+    dataset.generate(config, one, progress=False, log=logs.append)
+    dataset.generate(config, par, progress=False, log=logs.append,
+                     ray=distributed.RayConfig())
+    assert any(line.startswith("Ray: 3 shards") for line in logs), logs
+    names = [p.name for p in dataset.shard_paths(one, config)]
+    for name in names:
+        _assert_same_arrays(_arrays(one / name), _arrays(par / name))
+    assert io.load_json(one / "summary.json")["labelled_grasps"] == \
+        io.load_json(par / "summary.json")["labelled_grasps"]
+    # resume: a missing shard is recomputed by a task, the others are kept as they are
+    kept = (par / names[0]).stat().st_mtime_ns
+    (par / names[2]).unlink()
+    logs.clear()
+    dataset.generate(config, par, progress=False, log=logs.append,
+                     ray=distributed.RayConfig())
+    assert any(line.startswith("Ray: 1 shards") for line in logs), logs
+    assert (par / names[0]).stat().st_mtime_ns == kept
+    _assert_same_arrays(_arrays(one / names[2]), _arrays(par / names[2]))
+
+
+def test_dataset_command_takes_the_ray_flags(tmp_path, capsys):
+    out = tmp_path / "d0"
+    assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
+                 "--ray-cpus", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--ray-cpus" in err
+    assert not out.exists()
 
 
 # fault injection: these unit functions travel by value (tests/ is not importable by workers)
@@ -255,7 +316,8 @@ def _free_port() -> int:
 def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
     """``ray start --head`` on a loopback port plus a second ``ray start --address`` node
     (token auth disabled: loopback only), a regret sweep with SPREAD scheduling while a
-    worker process is killed, and the results equal the single-process run."""
+    worker process is killed, and a tiny D0 across both nodes: the results equal the
+    single-process run."""
     pytest.importorskip("ray")
     ray_bin = Path(sys.executable).with_name("ray")
     port = _free_port()
@@ -292,6 +354,26 @@ def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
         assert killed, "no worker process was found to kill"
         assert "on 2 CPUs (2 nodes)" in text, text[-3000:]
         _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
+
+        # a tiny D0 across both nodes (one object per shard, SPREAD), against this process's
+        d0_one, d0_par = tmp_path / "d0-one", tmp_path / "d0-ray"
+        from sern_jax.grasp import dataset
+
+        config = dataset.DatasetConfig(num_objects=4, poses_per_object=1, objects_per_shard=1)
+        dataset.generate(config, d0_one, progress=False, log=lambda s: None)
+        code = (
+            "from sern_jax import distributed\n"
+            "from sern_jax.grasp import dataset\n"
+            "config = dataset.DatasetConfig(num_objects=4, poses_per_object=1, "
+            "objects_per_shard=1)\n"
+            f"dataset.generate(config, {str(d0_par)!r}, progress=False, ray=distributed."
+            f"RayConfig(address='127.0.0.1:{port}', spread=True))\n")
+        out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, text=True,
+                             capture_output=True, timeout=600)
+        assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
+        assert "Ray: 4 shards" in out.stdout and "(2 nodes)" in out.stdout, out.stdout
+        for path in dataset.shard_paths(d0_one, config):
+            _assert_same_arrays(_arrays(path), _arrays(d0_par / path.name))
     finally:
         subprocess.run([str(ray_bin), "stop", "--force"], env=env, capture_output=True,
                        timeout=120)

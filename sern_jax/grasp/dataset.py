@@ -60,6 +60,7 @@ __all__ = [
     "load",
     "dataset_objects",
     "shard_paths",
+    "write_shard",
 ]
 
 CONTEXT_STREAM = 0
@@ -234,6 +235,7 @@ def generate(
     *,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    ray=None,
 ) -> dict:
     """Generates (or resumes) D0 into ``out_dir``; returns the summary dict.
 
@@ -241,22 +243,47 @@ def generate(
     gives the same files as an uninterrupted one. Existing shards are verified first; a
     damaged one is set aside and recomputed (``io.npz_unit_done``). The directory is locked
     (``io.run_lock``) while this runs: a second process gets ``io.RunLockedError``.
+    ``ray``: a ``sern_jax.distributed.RayConfig`` computes the missing shards as Ray tasks
+    (:func:`write_shard`, the function this process calls without it: the same files).
     """
     out_dir = Path(out_dir)
     _check_dir(out_dir, config)
     specs = dataset_objects(config)
     with io.run_lock(out_dir):
         _check_dir(out_dir, config)  # again, under the lock
-        return _generate(config, out_dir, specs, progress, log)
+        return _generate(config, out_dir, specs, progress, log, ray)
 
 
-def _generate(config, out_dir: Path, specs, progress: bool, log) -> dict:
+def write_shard(config: DatasetConfig, shard: int, specs, out_dir: str | Path,
+                on_object: Callable[[], None] | None = None) -> None:
+    """Simulates shard ``shard`` (objects ``specs``, the shard's slice of
+    :func:`dataset_objects`) and saves it atomically: the unit of work of D0, run in this
+    process or as a Ray task."""
+    root = jax.random.key(config.seed)
+    lo = shard * config.objects_per_shard
+    parts = []
+    for i, spec in zip(range(lo, lo + len(specs)), specs):
+        key = jax.random.fold_in(root, i)
+        lc = label_contexts(key, spec, config.poses_per_object, config.trials_per_grasp,
+                            config.backend)
+        parts.append((i, lc))
+        if on_object is not None:
+            on_object()
+    arrays = {
+        "object_index": np.concatenate(
+            [np.full(len(lc.pose), i, np.int32) for i, lc in parts]),
+        **{f: np.concatenate([getattr(lc, f) for _, lc in parts])
+           for f in LabelledContexts._fields},
+    }
+    io.save_npz(shard_paths(out_dir, config)[shard], **arrays)
+
+
+def _generate(config, out_dir: Path, specs, progress: bool, log, ray=None) -> dict:
     io.save_json(out_dir / "config.json",
                  {"config": config, "fingerprint": config.fingerprint(),
                   "physics": sim_lib.physics_settings(),
                   "label": "one Bernoulli outcome per valid candidate (first trial); "
                            "successes = count over trials_per_grasp"})
-    root = jax.random.key(config.seed)
     paths = shard_paths(out_dir, config)
     todo = [i for i, p in enumerate(paths) if not io.npz_unit_done(p, log)]
     log(f"D0: {config.num_objects} objects x {config.poses_per_object} poses x 64 "
@@ -266,27 +293,23 @@ def _generate(config, out_dir: Path, specs, progress: bool, log) -> dict:
 
     done = sum(min(config.objects_per_shard, config.num_objects - i * config.objects_per_shard)
                for i in range(config.num_shards) if i not in todo)
-    bar = tqdm(total=config.num_objects, initial=done, unit="obj", desc="dataset",
-               disable=not progress)
     t0 = time.perf_counter()
-    for s in todo:
-        lo = s * config.objects_per_shard
-        hi = min(lo + config.objects_per_shard, config.num_objects)
-        parts = []
-        for i in range(lo, hi):
-            key = jax.random.fold_in(root, i)
-            lc = label_contexts(key, specs[i], config.poses_per_object,
-                                config.trials_per_grasp, config.backend)
-            parts.append((i, lc))
-            bar.update(1)
-        arrays = {
-            "object_index": np.concatenate(
-                [np.full(len(lc.pose), i, np.int32) for i, lc in parts]),
-            **{f: np.concatenate([getattr(lc, f) for _, lc in parts])
-               for f in LabelledContexts._fields},
-        }
-        io.save_npz(paths[s], **arrays)
-    bar.close()
+    per = config.objects_per_shard
+    if ray is not None:
+        from sern_jax import distributed
+
+        distributed.run_units(
+            [distributed.Unit(paths[s].name, write_shard,
+                              (config, s, specs[s * per:(s + 1) * per],
+                               str(out_dir.resolve())))
+             for s in todo], ray, out_dir, log=log, progress=progress, desc="shards")
+    else:
+        bar = tqdm(total=config.num_objects, initial=done, unit="obj", desc="dataset",
+                   disable=not progress)
+        for s in todo:
+            write_shard(config, s, specs[s * per:(s + 1) * per], out_dir,
+                        on_object=lambda: bar.update(1))
+        bar.close()
     summary = summarize(out_dir, config)
     summary["seconds_this_run"] = time.perf_counter() - t0
     io.save_json(out_dir / "summary.json", summary)

@@ -208,10 +208,10 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
     lines += [
         "", "## 3. Online grasp learning (Algorithm 1, the paper's Table I)", "",
         f"Objects: {rule}. The hard-set rule: θ0's greedy choice succeeds at most 60 % of the "
-        "time and the best of the 64 candidates at least 80 % (the screen shipped with θ0, "
-        "which took the best candidate's value from the trials that chose it: biased upward; "
-        "`sern grasp screen` now values it on fresh trials, see docs/RESULTS.md); "
-        "objects that do not meet it fill the set by lowest θ0 greedy success. "
+        "time and the best of the 64 candidates at least 80 %, the best candidate valued on "
+        "fresh trials independent of those that chose it (the screen shipped with θ0); "
+        "objects that do not meet it fill the set by lowest θ0 greedy success among those "
+        "whose fresh best candidate reaches 80 %. "
         f"{size['seeds']} seeds x {size['rounds']} rounds of 20 exploration + 5 evaluation "
         "grasps; SERN α = 0.05, ε-greedy ε = 0.1. Round i = after i updates; θ0 = before "
         "learning.", "",

@@ -397,8 +397,31 @@ def _run_grid(args, transfer: bool = False) -> int:
         if c not in names:  # refuses an unknown cell before any work
             raise SystemExit(f"--cells: unknown cell {c!r}; choose from {', '.join(names)}")
     sub = "transfer-cell" if transfer else "cell"
+    from sern_jax import distributed
+
+    try:
+        ray = distributed.from_args(args)  # --ray [ADDRESS]: cells as Ray tasks (issue 20)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
+    if ray is not None and args.deadline:
+        raise SystemExit("--deadline applies to the worker processes, not --ray (stop the "
+                         "run and rerun it: finished cells are kept)")
     out.mkdir(parents=True, exist_ok=True)
     todo = [c for c in cells if not (out / f"{c}.json").exists()]
+    if ray is not None and todo:
+        # the module by its package name (not __main__), which every worker imports
+        import importlib
+
+        mod = importlib.import_module(__spec__.name if __spec__ else __name__)
+        fn = mod.run_transfer_cell if transfer else mod.run_cell
+        try:
+            distributed.run_units(
+                [distributed.Unit(f"{c}.json", fn, (c, out.resolve(), args.seeds,
+                                                     args.rounds, args.objects))
+                 for c in todo], ray, out, progress=False, desc="cells")
+        except distributed.UnitFailedError as exc:
+            raise SystemExit(str(exc)) from None
+        todo = []
     cores = sorted(os.sched_getaffinity(0))
     workers = max(1, min(args.workers, len(todo) or 1))
     share = max(1, len(cores) // workers)
@@ -475,6 +498,9 @@ def main(argv=None) -> int:
     p_run.add_argument("--workers", type=int, default=8)
     p_run.add_argument("--deadline", type=float, default=0.0,
                        help="seconds after which running cells are stopped (0 = none)")
+    from sern_jax import distributed
+
+    distributed.add_arguments(p_run)
     p_sum = sub.add_parser("summarise", help="summary.json from saved cells")
     p_sum.add_argument("out")
     p_tr = sub.add_parser("transfer", help="run the transfer cells in worker processes")
@@ -490,6 +516,7 @@ def main(argv=None) -> int:
     p_tr.add_argument("--deadline", type=float, default=0.0,
                       help="seconds after which running cells are stopped and their "
                            "finished rounds collected (0 = none)")
+    distributed.add_arguments(p_tr)
     p_tsum = sub.add_parser("transfer-summarise", help="summary.json from saved cells")
     p_tsum.add_argument("out")
     args = parser.parse_args(argv)

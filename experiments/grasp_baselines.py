@@ -219,13 +219,34 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
         regret_trials=regret_trials, regret_grasps=config.regret_grasps, backend=backend,
         run_dir=str(run_dir), checkpoints=True,
         command="python -m experiments.grasp_baselines run " + " ".join(sys.argv[2:]),
+        theta0_fingerprint=theta0.fingerprint,
+        physics=_physics_settings(),
         axes="[R + 1, O, Q, S]: round (0 = θ0), object, learner, seed")
+    # One entry per invocation (a comparison may take several short device calls): when
+    # it started, from which round, and (if it ended) its wall time, timings and trials.
+    previous = out / "meta.json"
+    calls = json.loads(previous.read_text()).get("calls", []) if previous.exists() else []
+    ckpt = run_dir / "checkpoint.npz"
+    start = int(io.load_npz(ckpt)["next_round"]) if ckpt.exists() else 0
+    call = {"started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "start_round": start, "host": meta["host"], "jax": meta.get("jax"),
+            "finished": False}
+    meta["calls"] = calls + [call]
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     res, secs = _run(config, specs, run_dir, theta0, progress)
-    meta.update(wall_s=secs, timings=res["timings"], trial_counts=res["trial_counts"],
+    call.update(finished=True, wall_s=secs, timings=res["timings"],
+                trial_counts=res["trial_counts"])
+    meta.update(wall_s=sum(c.get("wall_s", 0.0) for c in meta["calls"]),
                 fingerprint=res["fingerprint"])
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     collect(out)
+
+
+def _physics_settings():
+    from sern_jax.grasp import sim
+
+    fn = getattr(sim, "physics_settings", None)  # the trial (force, frictions, schedule)
+    return fn() if fn else None
 
 
 def collect(out: Path) -> None:

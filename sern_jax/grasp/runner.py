@@ -554,6 +554,7 @@ def run(
     A run that had already finished returns its results with ``states`` None (nothing is
     replayed).
     """
+    t_run = time.perf_counter()
     out_dir = Path(out_dir)
     names = [s.name for s in specs]
     if not names:
@@ -767,6 +768,9 @@ def run(
         evaluate(r, states)
         _save(ckpt, fingerprint, results, rewards, r + 1)
         bar.update(1)
+        if not progress:  # a line per round where there is no bar (device logs)
+            log(f"round {r}/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
+                + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
     bar.close()
     ahead.shutdown(wait=False, cancel_futures=True)
     rows = table_rows(names, config.policies, results.paper_eval,

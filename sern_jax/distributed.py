@@ -164,6 +164,7 @@ def from_args(args) -> RayConfig | None:
     if address is None:
         for flag, name, default in (("--ray-workers", "ray_workers", None),
                                     ("--ray-cpus", "ray_cpus", 1),
+                                    ("--ray-gpus", "ray_gpus", 0.0),
                                     ("--ray-retries", "ray_retries", 3)):
             if getattr(args, name, default) != default:
                 raise ValueError(f"{flag} applies to --ray runs; add --ray")
@@ -316,6 +317,17 @@ def _init(ray, config: RayConfig) -> bool:
     return True
 
 
+def _check_feasible(ray, config: RayConfig) -> None:
+    """A task no node can hold would wait forever: one line naming the flag instead."""
+    nodes = [n.get("Resources", {}) for n in ray.nodes() if n.get("Alive", True)]
+    for flag, key, need in (("--ray-cpus", "CPU", config.cpus_per_task),
+                            ("--ray-gpus", "GPU", config.gpus_per_task)):
+        most = max((float(r.get(key, 0.0)) for r in nodes), default=0.0)
+        if need > most:
+            raise ValueError(f"{flag} {need:g}: no node of the Ray cluster has that many "
+                             f"{key}s (the largest has {most:g})")
+
+
 def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLike, *,
               log: Callable[[str], None] = print, progress: bool = True,
               desc: str = "units") -> dict[str, float]:
@@ -343,6 +355,7 @@ def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLi
         return {}
     started = _init(ray, config)
     try:
+        _check_feasible(ray, config)
         env = worker_env(config, run_dir)
         options: dict[str, Any] = dict(num_cpus=config.cpus_per_task,
                                        num_gpus=config.gpus_per_task,

@@ -219,13 +219,23 @@ def test_dataset_on_ray_equals_single_process_and_resumes(local_ray, tmp_path):
     _assert_same_arrays(_arrays(one / names[2]), _arrays(par / names[2]))
 
 
-def test_dataset_command_takes_the_ray_flags(tmp_path, capsys):
+def test_dataset_command_takes_the_ray_flags(local_ray, tmp_path, capsys):
+    from sern_jax.grasp import dataset
+
     out = tmp_path / "d0"
     assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
                  "--ray-cpus", "0", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ray-cpus" in err
     assert not out.exists()
+    # the command's own --ray path against the library's single-process shard
+    assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
+                 "--no-progress", "--out", str(out)]) == 0
+    assert "Ray: 1 shards" in capsys.readouterr().out
+    config = dataset.DatasetConfig(num_objects=1, poses_per_object=1)
+    dataset.generate(config, tmp_path / "one", progress=False, log=lambda s: None)
+    _assert_same_arrays(_arrays(tmp_path / "one" / "shard_00000.npz"),
+                        _arrays(out / "shard_00000.npz"))
 
 
 def _fake_cell(cell: str, out, seeds: int, rounds: int, objects: int) -> None:

@@ -6,9 +6,10 @@ grasp's 64 candidates, and the same learner modules run on both.
 
 :func:`mlp` is a multi-head MLP in the style of Riquelme et al.'s NeuralLinear: a shared ReLU
 trunk φ(x) [h] and one linear head per arm, ``logit(x, a) = w_a·φ(x) + b_a``, ``r̂ = sigmoid``.
-Its ``features`` are ``onehot(a) ⊗ [φ(x), 1]`` [K(h + 1)], so ``logit = features·vec(W, b)``
-exactly and a single Bayesian linear regression on them (Neural-Linear) is the per-arm
-regression of the original (block-diagonal precision).
+Its ``features`` are :class:`~sern_jax.learners.neural_linear.ArmFeatures`: the trunk's φ(x)
+[h] and the candidate's arm (one-hot [K]), so ``logit = [φ(x), 1]·(w_a, b_a)`` exactly and
+Neural-Linear keeps one Bayesian linear regression per arm on [φ(x), 1], as the original
+NeuralLinear does.
 
 :func:`oracle` is the exact estimator r̂ = r(x) (scaled to [0, 1]) with nothing to train: the
 negative-control-free reference whose regret has a closed form.
@@ -23,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from sern_jax.contextual_problems import ContextualBandit
-from sern_jax.learners import base
+from sern_jax.learners import base, neural_linear
 from sern_jax.types import Array, Key, Network
 
 __all__ = ["candidate_inputs", "MLP", "mlp", "mlp_model", "oracle_model", "check_input"]
@@ -94,10 +95,7 @@ def mlp_model(num_arms: int, context_dim: int, hidden: Sequence[int] = (50, 50))
     def features(params, z):
         check_input(z.shape, num_arms, context_dim)
         _, h = module.apply(params, z)
-        h1 = jnp.concatenate([h, jnp.ones(h.shape[:-1] + (1,), h.dtype)], axis=-1)
-        onehot = z[..., context_dim:]
-        return (onehot[..., :, None] * h1[..., None, :]).reshape(
-            h.shape[:-1] + (num_arms * h1.shape[-1],))
+        return neural_linear.ArmFeatures(phi=h, arm=z[..., context_dim:])
 
     return base.Model(init=net.init, apply=apply, logits=logits, features=features)
 

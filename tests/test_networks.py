@@ -16,12 +16,14 @@ def test_logit_is_linear_in_the_features():
     x = jnp.asarray([0.3, -0.4])
     z = networks.candidate_inputs(x, 3)  # [K, d + K]
     assert z.shape == (3, 5)
-    feats = model.features(params, z)  # [K, K (h + 1)]
-    assert feats.shape == (3, 3 * 6)
+    feats = model.features(params, z)  # per-arm: φ(x) [K, h], the arm's one-hot [K, K]
+    assert feats.phi.shape == (3, 5) and feats.arm.shape == (3, 3)
+    np.testing.assert_array_equal(feats.arm, np.eye(3))
     head = params["params"]["Dense_2"]
     w = jnp.concatenate([head["kernel"], head["bias"][None, :]], axis=0)  # [h + 1, K]
-    np.testing.assert_allclose(feats @ w.T.reshape(-1), model.logits(params, z),
-                               rtol=1e-5, atol=1e-6)
+    phi1 = jnp.concatenate([feats.phi, jnp.ones((3, 1))], axis=1)  # [K, h + 1]
+    np.testing.assert_allclose(jnp.sum((phi1 @ w) * feats.arm, axis=1),
+                               model.logits(params, z), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(model.apply(params, z), jax.nn.sigmoid(model.logits(params, z)),
                                rtol=1e-6)
     # per-seed copies: vmapped init gives distinct parameters per key

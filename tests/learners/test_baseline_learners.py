@@ -186,7 +186,11 @@ def test_told_only_failures_ranks_those_lower(name):
     and by more than its estimate of candidates it was told nothing about."""
     model = _linear_model()
     lrn = dict(FACTORIES_OF(model))[name]
-    state = lrn.init(jax.random.key(0), model.init(jax.random.key(0)), CORE)
+    # Neural-Linear (prior mean: the network's r̂): from an empty core set, so its estimate
+    # starts at r̂ in (0, 1); a ridge fit to this 6-row C on 6 features overshoots below 0,
+    # where failures (label 0) pull it up, not down.
+    core = CORE._replace(weight=jnp.zeros(6)) if name.startswith("neural_lin") else CORE
+    state = lrn.init(jax.random.key(0), model.init(jax.random.key(0)), core)
     x_fail = jax.random.normal(jax.random.key(9), (E, D))
     action = jnp.asarray([0, 1, pol.NO_ARM, 3], jnp.int32)
     others = jax.random.normal(jax.random.key(10), (K - E, D))
@@ -216,14 +220,22 @@ def _ridge(phi, y, w, lam, a0, b0):
     return mean, prec, a, b
 
 
+@pytest.mark.parametrize("prior_mean", neural_linear.PRIOR_MEANS)
 @pytest.mark.parametrize("name", ["neural_lints", "neural_linucb"])
-def test_neural_linear_posterior_is_ridge_on_current_features(name):
-    lrn = FACTORIES[name]()
+def test_neural_linear_posterior_is_ridge_on_current_features(name, prior_mean):
+    """The posterior is the closed-form ridge/NIG fit on D ∪ C with the current θ's
+    features, to the residuals y − r̂_θ (prior mean ``network``) or to y (``zero``)."""
+    config = (neural_linear.NeuralLinTSConfig if name == "neural_lints"
+              else neural_linear.NeuralLinUCBConfig)(nl_prior_mean=prior_mean)
+    lrn = getattr(neural_linear, name)(MODEL, TRAIN, config)
     state = lrn.init(jax.random.key(0), THETA0, CORE)
     for r in range(3):  # init (C, θ0 features), then after each update (new θ's features)
         buf = state.buffer
         phi = np.asarray(neural_linear.design(MODEL.features(state.params, *buf.inputs)))
-        mean, prec, a, b = _ridge(phi, buf.reward, buf.weight, 0.25, 6.0, 6.0)
+        y = np.asarray(buf.reward, np.float64)
+        if prior_mean == "network":
+            y = y - np.asarray(MODEL.apply(state.params, *buf.inputs), np.float64)
+        mean, prec, a, b = _ridge(phi, y, buf.weight, 0.25, 6.0, 6.0)
         post = state.extra.posterior
         np.testing.assert_allclose(post.mean, mean, rtol=1e-4, atol=1e-5)
         np.testing.assert_allclose(post.precision, prec, rtol=1e-5, atol=1e-5)
@@ -231,6 +243,29 @@ def test_neural_linear_posterior_is_ridge_on_current_features(name):
         np.testing.assert_allclose(post.b, b, rtol=1e-4)
         state = jax.jit(lrn.update)(jax.random.key(r), state, _batch(jax.random.key(r)))
     assert int(state.buffer.count) == 3 * E
+
+
+@pytest.mark.parametrize("name", ["neural_lints", "neural_linucb"])
+def test_neural_linear_centred_on_the_network_without_data(name):
+    """Prior mean ``network``: with no data (an empty core set) the greedy estimate is the
+    network's r̂ exactly and the scores are r̂ plus the prior's spread; ``zero`` starts at
+    0. After data, predict = r̂ + φ·μ."""
+    empty = CORE._replace(weight=jnp.zeros(6))
+    obs = _obs(jax.random.key(3), num_valid=K)
+    r_hat = np.asarray(MODEL.apply(THETA0, *obs.inputs))
+    for prior_mean, want in (("network", r_hat), ("zero", np.zeros(K))):
+        config = (neural_linear.NeuralLinTSConfig if name == "neural_lints"
+                  else neural_linear.NeuralLinUCBConfig)(nl_prior_mean=prior_mean)
+        lrn = getattr(neural_linear, name)(MODEL, TRAIN, config)
+        state = lrn.init(jax.random.key(0), THETA0, empty)
+        np.testing.assert_allclose(lrn.predict(state, obs), want, rtol=1e-6, atol=1e-7)
+        state = lrn.update(jax.random.key(1), state, _batch(jax.random.key(2)))
+        phi = neural_linear.design(MODEL.features(state.params, *obs.inputs))
+        mean = np.asarray(phi) @ np.asarray(state.extra.posterior.mean)
+        offset = (np.asarray(MODEL.apply(state.params, *obs.inputs)) if prior_mean ==
+                  "network" else 0.0)
+        np.testing.assert_allclose(lrn.predict(state, obs), mean + offset, rtol=1e-5,
+                                   atol=1e-6)
 
 
 def test_fit_posterior_weights_and_prior():
@@ -391,6 +426,8 @@ def test_decaying_schedules_and_normalized_probs():
     (neural_linear.NeuralLinTSConfig, {"a0": float("nan")}, "--a0"),
     (neural_linear.NeuralLinTSConfig, {"b0": -1.0}, "--b0"),
     (neural_linear.NeuralLinUCBConfig, {"ucb_width": float("inf")}, "--ucb-width"),
+    (neural_linear.NeuralLinUCBConfig, {"nl_prior_mean": "one"}, "--nl-prior-mean"),
+    (neural_linear.NeuralLinTSConfig, {"nl_prior_mean": 0.0}, "--nl-prior-mean"),
     (ensemble.EnsembleConfig, {"ensemble_size": 0}, "--ensemble-size"),
     (ensemble.EnsembleConfig, {"ensemble_size": 2.5}, "--ensemble-size"),
     (ensemble.EnsembleConfig, {"bootstrap": "jackknife"}, "--bootstrap"),

@@ -127,12 +127,27 @@ def _run(config, specs, out_dir, theta0, progress):
 # ----------------------------------------------------------------------------- tune
 
 
+def tune_setting(i: int, knobbed: tuple[str, ...], objects: list[str], seeds: int,
+                 rounds: int, explore: int, backend: str, run_dir: str) -> None:
+    """Setting ``i`` of the GRID, run into ``run_dir``: the unit of ``tune --ray`` (issue 20;
+    the same ``runner.run`` call that :func:`tune` makes, which then reads the finished run
+    back)."""
+    from sern_jax.grasp import artifacts
+
+    values = {GRID[n][0]: GRID[n][1][i] for n in knobbed}
+    config = online_config(knobbed, values, num_seeds=seeds, rounds=rounds, explore=explore,
+                           backend=backend)
+    _run(config, _specs(objects), Path(run_dir), artifacts.load_theta0(), False)
+
+
 def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
          num_objects: int = NUM_TUNING_OBJECTS, explore: int = 20,
-         names: tuple[str, ...] | None = None) -> dict:
+         names: tuple[str, ...] | None = None, ray=None) -> dict:
     """Runs the GRID's settings on :func:`tuning_objects`; writes and returns ``tuned.json``
     (and ``tune_per_seed.npz``: low-variance success [setting, R + 1, O, Q, S]). A setting
-    whose run directory holds a finished run is read back, not rerun (resume)."""
+    whose run directory holds a finished run is read back, not rerun (resume). ``ray``
+    (``sern_jax.distributed.RayConfig``): the three settings run as Ray tasks first
+    (:func:`tune_setting`), and are then read back; ``wall_s`` is then the tasks' time."""
     from sern_jax import io
     from sern_jax.grasp import artifacts
 
@@ -145,12 +160,25 @@ def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
     knobbed = tuple(n for n in (names or learners()) if n in GRID)
     scores = {n: [] for n in knobbed}
     wall, lowvars, explores = [], [], []
+    reports = {}
+    if ray is not None:
+        import importlib
+
+        from sern_jax import distributed
+
+        # the module by its package name (not __main__), which every worker imports
+        mod = importlib.import_module(__spec__.name if __spec__ else __name__)
+        reports = distributed.run_units(
+            [distributed.Unit(f"tune/setting{i}", mod.tune_setting,
+                              (i, knobbed, objects, seeds, rounds, explore, backend,
+                               str((out / "tune" / f"setting{i}").resolve())))
+             for i in range(3)], ray, out, progress=False, desc="settings")
     for i in range(3):
         values = {GRID[n][0]: GRID[n][1][i] for n in knobbed}
         config = online_config(knobbed, values, num_seeds=seeds, rounds=rounds,
                                explore=explore, backend=backend)
         res, secs = _run(config, specs, out / "tune" / f"setting{i}", theta0, progress)
-        wall.append(secs)
+        wall.append(reports.get(f"tune/setting{i}", {}).get("seconds", secs))
         lowvar = np.asarray(res["results"].lowvar_eval)  # [R + 1, O, Q, S]
         lowvars.append(lowvar)
         explores.append(np.asarray(res["results"].explore_success))
@@ -497,7 +525,16 @@ def main(argv=None) -> None:
     p.add_argument("--policies", default=None,
                    help="run: comma-separated learners (default: every registered one)")
     p.add_argument("--no-progress", action="store_true")
+    from sern_jax import distributed
+
+    distributed.add_arguments(p)  # tune --ray: the three settings as Ray tasks (issue 20)
     a = p.parse_args(argv)
+    try:
+        ray = distributed.from_args(a)
+    except ValueError as e:
+        p.error(str(e))
+    if ray is not None and a.what != "tune":
+        p.error("--ray applies to tune (its three settings are the units)")
     for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
                     ("--rounds", a.rounds), ("--tune-rounds", a.tune_rounds),
                     ("--repeats", a.repeats), ("--explore", a.explore)):
@@ -527,10 +564,13 @@ def main(argv=None) -> None:
             a.json_out.write_text(text)
     elif a.what == "tune":
         a.out.mkdir(parents=True, exist_ok=True)
-        print(json.dumps(tune(a.out, a.tune_seeds, a.tune_rounds, a.backend,
-                              not a.no_progress, explore=a.explore,
-                              num_objects=a.objects or NUM_TUNING_OBJECTS, names=names),
-                         indent=1))
+        try:
+            doc = tune(a.out, a.tune_seeds, a.tune_rounds, a.backend, not a.no_progress,
+                       explore=a.explore, num_objects=a.objects or NUM_TUNING_OBJECTS,
+                       names=names, ray=ray)
+        except distributed.UnitFailedError as e:  # one line naming the setting
+            raise SystemExit(str(e)) from None
+        print(json.dumps(doc, indent=1))
     elif a.what == "run":
         run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
             not a.no_progress, a.explore, a.run_dir, a.regret_grasps, names)

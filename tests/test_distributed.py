@@ -8,6 +8,7 @@ process mid-run, and compares with the single-process results.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -265,6 +266,39 @@ def test_sensitivity_grid_cells_on_ray(local_ray, tmp_path, monkeypatch, capsys)
     assert (tmp_path / f"{cells[0]}.json").stat().st_mtime_ns == kept
     with pytest.raises(SystemExit, match="--deadline"):
         grid.main(args + ["--deadline", "10"])
+
+
+def _fake_setting(i, knobbed, objects, seeds, rounds, explore, backend, run_dir) -> None:
+    io.save_json(Path(run_dir) / "done.json", {"setting": i, "pid": os.getpid()})
+
+
+def test_baselines_tune_settings_on_ray(local_ray, tmp_path, monkeypatch):
+    """`python -m experiments.grasp_baselines tune --ray`: the three settings are tasks (a
+    stand-in setting here: a real one takes minutes), then read back by the usual loop."""
+    import types
+
+    import experiments.grasp_baselines as grid
+
+    seen = []
+
+    def read_back(config, specs, run_dir, theta0, progress):
+        doc = io.load_json(Path(run_dir) / "done.json")  # written by the task
+        assert doc["pid"] != os.getpid()
+        seen.append(doc["setting"])
+        q, o, r = len(config.policies), len(specs), config.rounds
+        lowvar = np.full((r + 1, o, q, 2), 0.1 * doc["setting"], np.float32)
+        return {"results": types.SimpleNamespace(lowvar_eval=lowvar,
+                                                 explore_success=lowvar[1:])}, 0.0
+
+    monkeypatch.setattr(grid, "tune_setting", _fake_setting)
+    monkeypatch.setattr(grid, "_run", read_back)
+    grid.main(["tune", "--out", str(tmp_path), "--tune-seeds", "2", "--tune-rounds", "1",
+               "--ray", "--no-progress"])
+    assert seen == [0, 1, 2]
+    tuned = json.loads((tmp_path / "tuned.json").read_text())
+    assert all(w > 0 for w in tuned["wall_s"])  # the tasks' seconds, not the read-back's
+    with pytest.raises(SystemExit):
+        grid.main(["run", "--out", str(tmp_path), "--ray"])  # --ray is for tune only
 
 
 # fault injection: these unit functions travel by value (tests/ is not importable by workers)

@@ -38,6 +38,7 @@ head node's ports: anyone who reaches an open Ray head can run code on every nod
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
@@ -238,10 +239,20 @@ def _pin_cores(threads: int) -> list[int] | None:
     import tempfile
 
     lock_dir = Path(tempfile.gettempdir()) / "sern-ray-cores"
-    lock_dir.mkdir(exist_ok=True)
     fds, cores = [], []
-    for core in sorted(os.sched_getaffinity(0)):
-        fd = os.open(lock_dir / f"core-{core}", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    try:
+        lock_dir.mkdir(exist_ok=True)
+        with contextlib.suppress(OSError):
+            os.chmod(lock_dir, 0o1777)  # other users' workers claim cores here too
+        candidates = sorted(os.sched_getaffinity(0))
+    except OSError:  # no usable lock directory: run unpinned
+        candidates = []
+    for core in candidates:
+        try:
+            fd = os.open(lock_dir / f"core-{core}", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC,
+                         0o666)
+        except OSError:
+            continue
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

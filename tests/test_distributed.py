@@ -178,13 +178,13 @@ def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, ca
     _assert_same_arrays(_arrays(one / "results.npz"), _arrays(par / "results.npz"))
 
 
-@pytest.mark.slow  # ~30 s on 2 shared cores: the summary runner compiles in every worker
 def test_a_task_no_node_can_hold_is_one_line(local_ray, tmp_path, capsys):
     assert main(TINY + ["--ray", "--ray-cpus", "3", "--out", str(tmp_path / "r")]) == 2
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
     assert len(err) == 1 and "--ray-cpus 3" in err[0] and "largest has 2" in err[0], err
 
 
+@pytest.mark.slow  # ~25 s on 2 shared cores: the summary runner compiles in every worker
 def test_regret_summaries_on_ray_equal_single_process(local_ray, tmp_path):
     one, par = tmp_path / "one", tmp_path / "ray"
     flags = ["regret", "--policies", "softmax", "-T", "300", "-S", "32", "--chunk-size", "16",

@@ -324,7 +324,12 @@ def _init(ray, config: RayConfig) -> bool:
         cpus = None if config.workers is None else config.workers * config.cpus_per_task
         ray.init(address="local", num_cpus=cpus, include_dashboard=False, **kwargs)
     else:
-        ray.init(address=config.address, **kwargs)
+        try:
+            ray.init(address=config.address, **kwargs)
+        except (ConnectionError, RuntimeError, ValueError) as exc:  # no cluster there
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise ValueError(f"--ray {config.address}: cannot join a Ray cluster there "
+                             f"({_one_line(first, 160)})") from None
     return True
 
 

@@ -124,6 +124,22 @@ def test_cluster_doc_quotes_the_committed_scaling_runs():
     assert f"{pinned[2]['task_seconds_min_median_max'][1]:.1f} s" in doc
 
 
+def test_no_cluster_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):
+    ray = pytest.importorskip("ray")
+    if ray.is_initialized():
+        pytest.skip("a Ray is already running in this process")
+
+    def refuse(*args, **kwargs):
+        raise ConnectionError("Could not find any running Ray instance.\nmore text")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    out = tmp_path / "r"
+    assert main(TINY + ["--ray", "auto", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--ray auto: cannot join" in err, err
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------- on a local Ray
 
 @pytest.fixture(scope="module")

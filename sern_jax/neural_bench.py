@@ -225,6 +225,10 @@ def run_bench(config: NeuralBenchConfig, log=None) -> dict:
                               "seed_rounds_per_s": config.loop_seeds * config.loop_rounds / wall}
         if log:
             log(f"python loop: {wall:.1f} s")
+    try:  # the 2 cores are shared: the load over the run, beside the start's
+        out["load_average_end"] = list(os.getloadavg())
+    except OSError:
+        pass
     if "batched" in out and "python_loop" in out:
         out["speedup"] = (out["batched"]["seed_rounds_per_s"]
                           / out["python_loop"]["seed_rounds_per_s"])

@@ -96,10 +96,17 @@ def test_bad_input_raises_before_compiling():
         nr.make_run(nr.NeuralRunConfig(horizon=45, update_every=10), problem, learner, model)
     with pytest.raises(ValueError, match="--horizon"):  # more rounds than the buffer holds
         nr.make_run(nr.NeuralRunConfig(horizon=50, update_every=10), problem, learner, model)
-    with pytest.raises(ValueError, match="d \\+ K"):  # a network for another context shape
-        wrong = networks.mlp_model(5, 3, (4,))
+    with pytest.raises(ValueError, match="--hidden network .*d \\+ K") as err:
+        wrong = networks.mlp_model(5, 3, (4,))  # a network for another context shape
         nr.make_run(nr.NeuralRunConfig(horizon=40, update_every=10), problem,
                     registry.make("greedy", wrong, train), wrong)
+    assert "\n" not in str(err.value)  # one line, naming the flag
+    for bad, flag in ((lambda: cp.wheel(1.0), "--delta"), (lambda: cp.wheel(0.0), "--delta"),
+                      (lambda: cp.linear(jax.random.key(0), num_arms=1), "--arms"),
+                      (lambda: cp.finite(jax.random.key(0), num_arms=1), "--arms")):
+        with pytest.raises(ValueError, match=flag) as err:
+            bad()
+        assert "\n" not in str(err.value)
 
 
 def test_diagnostics_per_context_table():

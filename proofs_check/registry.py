@@ -37,6 +37,7 @@ NAMES = (
     # Theorem 1 and Assumption 3 on a real neural estimator (issue 19)
     "n1_neural_floor",
     "a3_neural_error",
+    "t4_neural_bound",
 )
 
 

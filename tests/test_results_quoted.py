@@ -1,6 +1,7 @@
 """Every number docs/RESULTS.md (and docs/GRASP.md) quotes from the committed per-seed
 results under experiments/results/ is recomputed here from those files (issue 17)."""
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -368,3 +369,221 @@ def test_baselines_partial_run_quoted(tmp_path):
     assert not greedy["resolved"] and round(greedy["pvalue_holm"], 2) == 0.27
     worse = {k: _pct(d["mean"]) for k, d in paired.items() if d["resolved"]}
     assert worse == {"neural_linucb": -9.5, "neural_lints": -7.4, "neural_ucb": -7.9}
+
+
+# --- The headline runs (issue 17): Table I's paper setting, the 20-seed run, the ablations
+# and sim-to-sim transfer, each from its committed per-seed files ---
+
+from experiments import grasp_learning as gl  # noqa: E402
+
+DOC = (Path(__file__).resolve().parents[1] / "docs" / "RESULTS.md").read_text()
+SETTINGS = ("paper", "strong", "alpha")
+
+
+def _rebuilt(setting, tmp_path):
+    d = tmp_path / setting
+    d.mkdir()
+    for f in (RESULTS / setting).glob("*.json"):
+        if f.name != "summary.json":
+            shutil.copy(f, d / f.name)
+    return json.loads(json.dumps(gl.summarise(d)))
+
+
+@pytest.fixture(scope="module")
+def headline(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("headline")
+    return {s: _rebuilt(s, tmp) for s in SETTINGS}
+
+
+@pytest.fixture(scope="module")
+def transfer(tmp_path_factory):
+    d = tmp_path_factory.mktemp("transfer")
+    for f in (RESULTS / "transfer").glob("*.json"):
+        if f.name != "summary.json":
+            shutil.copy(f, d / f.name)
+    return json.loads(json.dumps(grasp_sensitivity.summarise_transfer(d)))
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_committed_headline_summary_is_what_the_per_seed_files_give(headline, setting):
+    assert json.loads((RESULTS / setting / "summary.json").read_text()) == headline[setting]
+
+
+def test_committed_transfer_summary_is_what_the_per_seed_files_give(transfer):
+    assert json.loads((RESULTS / "transfer" / "summary.json").read_text()) == transfer
+
+
+def test_headline_runs_were_made_with_the_shipped_theta0_and_trial():
+    """A per-seed file made before the trial changed (another θ0) fails here."""
+    from sern_jax.grasp import artifacts, scene, sim
+
+    shipped = artifacts.load_theta0().fingerprint
+    old = artifacts.load_theta0(grasp_sensitivity.THETA0_6N_DIR).fingerprint
+    trial = json.loads(json.dumps(dataclasses.asdict(sim.TrialConfig())))
+    files = [f for s in SETTINGS + ("transfer",) for f in (RESULTS / s).glob("*.json")
+             if f.name != "summary.json"]
+    assert len(files) == 13
+    for f in files:
+        d = json.loads(f.read_text())
+        cell = d.get("world", {}).get("cell")
+        want_trial = (json.loads(json.dumps(dataclasses.asdict(
+            grasp_sensitivity.transfer_world(cell)[1]))) if cell else trial)
+        assert d["trial_config"] == want_trial, f
+        want_scene = json.loads(json.dumps(dataclasses.asdict(
+            grasp_sensitivity.transfer_world(cell)[0].scene if cell else scene.SceneConfig())))
+        assert d["scene_config"] == want_scene, f
+        want = old if cell == "theta0_6N" else shipped
+        assert d["theta0_digest"] == want, f
+        assert d.get("world", {}).get("shipped_theta0_digest", shipped) == shipped, f
+        assert d["machine"]["cpu"] and d["command"].startswith("python"), f
+
+
+def test_table1_tables_are_the_committed_run(headline):
+    s = headline["paper"]
+    for md in (gl.table1_markdown(s, "paper"), gl.fixed_pose_markdown(s, "paper"),
+               gl.pooled_markdown(s, "paper"), gl.comparisons_markdown(s),
+               gl.comparisons_markdown(s, "explore_success")):
+        assert md in DOC, md.splitlines()[2]
+
+
+def test_strong_tables_are_the_committed_run(headline):
+    s = headline["strong"]
+    for md in (gl.pooled_markdown(s, "strong"), gl.comparisons_markdown(s),
+               gl.comparisons_markdown(s, "explore_success")):
+        assert md in DOC, md.splitlines()[2]
+
+
+@pytest.mark.parametrize("setting", ("alpha",))
+def test_ablation_tables_are_the_committed_runs(headline, setting):
+    assert gl.comparisons_markdown(headline[setting]) in DOC
+
+
+def test_transfer_table_is_the_committed_run(transfer):
+    assert grasp_sensitivity.transfer_markdown(transfer) in DOC
+
+
+def _c(s, fam, name):
+    return next(c for c in s["comparisons"][fam] if gl._short(c["name"]) == name)
+
+
+def test_fixed_pose_evaluation_noise_quoted():
+    out = {}
+    for st in ("paper", "strong"):
+        d = gl.load_results(RESULTS / st)[st]
+        lv, pe = d["lowvar_eval"], d["paper_eval"]
+        r0 = lv[0, :, 0, :]  # θ0: every seed evaluates the same network
+        s = lv[-1].mean(0)  # [Q, S]
+        out[st] = (_pct(r0.std(1, ddof=1).mean()), _pct(r0.mean(0).std(ddof=1)),
+                   _pct(pe[0, :, 0, :].std(1, ddof=1).mean()), _pct((s[0] - s[2]).std(ddof=1)))
+    assert out["paper"] == (10.4, 5.4, 19.0, 6.1)
+    assert (out["strong"][0], out["strong"][1], out["strong"][3]) == (6.8, 3.1, 2.5)
+
+
+def test_table1_prose_quoted(headline):
+    s = headline["paper"]
+    run = s["runs"]["paper"]
+    assert run["seeds"] == 5 and run["rounds_done"] == 5 and run["objects"] == [
+        "triangular_prism", "tless_part_a", "detergent_bottle", "tless_part_a_steel",
+        "pipe_tee_steel", "tless_part_b_steel"]
+    fam = s["comparisons"]["final_round"]
+    assert len(fam) == 16 and all(round(c["pvalue_holm"], 2) == 1.0 for c in fam)
+    assert all(c["lower"] <= 0 <= c["upper"] for c in fam)
+    assert _pct(_c(s, "final_round", "sern − egreedy, fixed-pose, pooled")["mean"]) == -2.5
+    assert _pct(_c(s, "final_round", "sern − greedy, fixed-pose, pooled")["mean"]) == -3.8
+    ex = {c["name"]: c for c in s["comparisons"]["explore_success"]}
+    assert [(_pct(c["mean"]), c["resolved"]) for c in ex.values()] == [(-2.5, True), (-3.2, True)]
+    gains = [v["final_minus_theta0_lowvar"] for v in run["policies_pooled"].values()]
+    assert all(g["lower"] > 0 for g in gains)
+    assert (_pct(min(g["mean"] for g in gains)), _pct(max(g["mean"] for g in gains))) == (12.2, 15.9)
+    rows = {(r["object"], r["policy"]): r for r in run["table"]}
+    tri = [rows[("triangular_prism", p)]["lowvar_rounds"] for p in ("sern", "egreedy", "greedy")]
+    assert round(tri[0][0]) == 30 and sorted(round(t[-1]) for t in tri) == [88, 88, 89]
+    assert sorted(round(t[2]) for t in tri) == [79, 83, 89]
+    det = rows[("detergent_bottle", "sern")]["lowvar_rounds"]
+    assert (round(det[0]), round(det[-1])) == (94, 86)
+    fills = [rows[(o, "sern")]["lowvar_rounds"][0] for o in run["objects"][1:]]
+    assert (round(min(fills)), round(max(fills))) == (74, 95)
+    assert round(max(se for r in run["table"] for se in r["se"])) == 19
+    imprv = [r["imprv"] for r in run["table"] if r["object"] == "triangular_prism"]
+    strong_imprv = [r["imprv"] for r in headline["strong"]["runs"]["strong"]["table"]
+                    if r["object"] == "triangular_prism"]
+    assert (round(100 * min(imprv + strong_imprv)), round(100 * max(imprv + strong_imprv))) \
+        == (90, 122)
+
+
+def test_strong_prose_quoted(headline):
+    s = headline["strong"]
+    run = s["runs"]["strong"]
+    assert run["seeds"] == 20 and run["rounds_done"] == 5 and len(run["parts"]) == 3
+    g = _c(s, "final_round", "sern − greedy, fixed-pose, pooled")
+    e = _c(s, "final_round", "sern − egreedy, fixed-pose, pooled")
+    assert [_pct(v) for v in (g["mean"], g["lower"], g["upper"])] == [0.3, -0.9, 1.5]
+    assert [_pct(v) for v in (e["mean"], e["lower"], e["upper"])] == [-0.4, -1.4, 0.6]
+    fam = s["comparisons"]["final_round"]
+    assert len(fam) == 16 and not any(c["resolved"] for c in fam)
+    low = min(fam, key=lambda c: c["pvalue_holm"])
+    assert gl._short(low["name"]) == "sern − egreedy, fixed-pose, tless_part_a"
+    assert (round(low["pvalue_holm"], 2), _pct(low["mean"]), _pct(low["half"])) == (0.42, -2.6, 2.3)
+    assert [c["name"] for c in fam if c["upper"] < 0 or c["lower"] > 0] == [low["name"]]
+    pol = run["policies_pooled"]
+    assert [_pct(pol[p]["explore_success"]) for p in ("sern", "egreedy", "greedy")] == [
+        83.5, 86.8, 88.3]
+    ex = s["comparisons"]["explore_success"]
+    assert [(_pct(c["mean"]), c["resolved"]) for c in ex] == [(-3.2, True), (-4.8, True)]
+    assert _pct(pol["sern"]["lowvar_by_round"][0]) == 77.2
+    gains = [pol[p]["final_minus_theta0_lowvar"] for p in pol]
+    assert all(g["lower"] > 0 and 16.5 <= _pct(g["mean"]) <= 17.5 for g in gains)
+    rows = {(r["object"], r["policy"]): r for r in run["table"]}
+    tri = [rows[("triangular_prism", p)]["lowvar_rounds"] for p in ("sern", "egreedy", "greedy")]
+    assert round(tri[0][0]) == 39 and sorted(round(t[-1]) for t in tri) == [91, 92, 92]
+    det = [rows[("detergent_bottle", p)] for p in ("sern", "egreedy", "greedy")]
+    assert round(det[0]["lowvar_rounds"][0]) == 92 and round(det[0]["theta0"]) == 97
+    assert sorted(round(r["lowvar_rounds"][-1]) for r in det) == [91, 92, 93]
+    assert sorted(round(r["rounds"][-1]) for r in det) == [89, 92, 92]
+
+
+def test_alpha_prose_quoted(headline):
+    s = headline["alpha"]
+    assert not any(c["resolved"] for c in s["comparisons"]["final_round"])
+    ex = [_pct(s["runs"][f"alpha={a}"]["policies_pooled"]["sern"]["explore_success"])
+          for a in ("0.01", "0.05", "0.2", "1.0")]
+    assert ex == [87.0, 83.6, 78.7, 75.7]
+    assert all(c["resolved"] for c in s["comparisons"]["explore_success"])
+
+
+def test_transfer_prose_quoted(transfer):
+    c = transfer["cells"]
+    assert transfer["objects"] == ["triangular_prism", "tless_part_a", "detergent_bottle"]
+    assert transfer["seeds"] == 5 and all(v["rounds_done"] == 20 for v in c.values())
+    assert transfer["cells_missing"] == ["d435", "mjx"]
+    assert _pct(c["A"]["theta0_B"]["mean"]) == 69.4
+    assert [_pct(c[k]["theta0_B"]["mean"]) for k in ("friction_low", "heavy", "grip_6N")] == [
+        46.0, 43.3, 24.0]
+    rec5 = [c[k]["policies"][p]["recovered"]["5"] for k in ("friction_low", "heavy")
+            for p in ("sern", "egreedy", "greedy")]
+    assert (round(100 * min(rec5)), round(100 * max(rec5))) == (147, 203)
+    a5 = [c["A"]["policies"][p]["gain"]["5"]["mean"] for p in ("sern", "egreedy", "greedy")]
+    assert (_pct(min(a5)), _pct(max(a5))) == (20.4, 23.5)
+
+    def minus_a(cell, p):
+        m = c[cell]["policies"][p]["minus_A"]["20"]
+        return (_pct(m["mean"]), _pct(m["half"]))
+
+    assert [minus_a("friction_low", p) for p in ("sern", "egreedy", "greedy")] == [
+        (-0.6, 2.2), (-2.5, 6.0), (-1.9, 5.4)]
+    assert [minus_a("heavy", p) for p in ("sern", "egreedy", "greedy")] == [
+        (-2.7, 3.0), (-2.1, 2.6), (-0.6, 3.1)]
+    assert [minus_a("grip_6N", p) for p in ("sern", "egreedy", "greedy")] == [
+        (-17.3, 2.0), (-23.5, 8.8), (-16.7, 3.7)]
+    rec20 = [c["grip_6N"]["policies"][p]["recovered"]["20"] for p in ("sern", "egreedy", "greedy")]
+    assert (round(100 * min(rec20)), round(100 * max(rec20))) == (106, 119)
+    t6 = c["theta0_6N"]
+    assert (_pct(t6["theta0_B"]["mean"]), _pct(t6["gap"]["mean"]), _pct(t6["gap"]["half"])) == (
+        78.1, -8.8, 10.1)
+    assert [minus_a("theta0_6N", p) for p in ("sern", "egreedy", "greedy")] == [
+        (1.0, 1.8), (1.3, 1.4), (2.1, 1.8)]
+    comps = transfer["comparisons"]
+    assert len(comps) == 20 and not any(x["resolved"] for x in comps)
+    low = min(comps, key=lambda x: x["pvalue_holm"])
+    assert low["name"] == "heavy: sern - egreedy, round 5"
+    assert (round(low["pvalue_holm"], 2), _pct(low["mean"]), _pct(low["half"])) == (0.48, -5.2, 4.1)

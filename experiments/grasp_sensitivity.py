@@ -26,7 +26,22 @@ against A (round 0) and how much of that online learning recovers by round 1 and
 
 ``run`` gives each worker an equal share of the machine's cores (``--workers``), stops
 workers still running at ``--deadline`` seconds (their cells are reported as not run), and
-writes ``<out>/<cell>.json`` per finished cell and ``<out>/summary.json``.
+writes ``<out>/<cell>.json`` per finished cell and ``<out>/summary.json``. (The grid's cells
+name their force explicitly; the committed grid was made under the previous 6 N trial and θ0.)
+
+Sim-to-sim transfer over 20 rounds (``TRANSFER_CELLS``: world A itself, lower friction,
+heavier objects, D435 depth noise, a 6 N grip, MJX physics, and the previous trial's θ0
+meeting world A), per-seed files in ``experiments.grasp_learning``'s format:
+
+    python -m experiments.grasp_sensitivity transfer --seeds 5 --rounds 20 --objects 3 \
+        --workers 6 --deadline 440 --out runs/transfer     # or transfer-cell CELL
+    python -m experiments.grasp_sensitivity transfer-summarise runs/transfer
+    python -m figures.make_transfer_fig runs/transfer docs/img/transfer.png
+
+``transfer-summarise`` gives per cell the gap θ0(A) − θ0(B) (paired by seed), per policy the
+gain by rounds 1, 5 and 20 (and the last finished round of a stopped cell) with t intervals,
+the share of the gap recovered, the distance to the same policy learning in A, and SERN −
+peer in B with Holm over every cell, peer and round.
 """
 
 from __future__ import annotations

@@ -432,6 +432,7 @@ def test_bad_config_is_a_clear_error(field, value, match):
     (["--regret-trials", "-2"], "--regret-trials must be an integer >= 0"),
     (["--regret-grasps", "-1"], "--regret-grasps must be an integer >= 0"),
     (["--regret-grasps", "21"], "--regret-grasps must be <= --explore (20), got 21"),
+    (["--nl-prior-mean", "one"], "--nl-prior-mean must be one of network, zero"),
     (["--eval-trials", "0"], "--eval-trials must be >= 1 when --eval-poses > 0"),
     (["--p", "1.5"], "--p must"),
     (["--mesh", "/nonexistent/part.obj"], "mesh file not found"),

@@ -356,7 +356,7 @@ def test_theory_other_objects_quoted():
 from experiments import grasp_learning as gl  # noqa: E402
 
 DOC = (Path(__file__).resolve().parents[1] / "docs" / "RESULTS.md").read_text()
-SETTINGS = ("paper", "strong", "alpha")
+SETTINGS = ("paper", "strong", "alpha", "core_set", "loss", "schedule")
 
 
 def _rebuilt(setting, tmp_path):
@@ -401,7 +401,7 @@ def test_headline_runs_were_made_with_the_shipped_theta0_and_trial():
     trial = json.loads(json.dumps(dataclasses.asdict(sim.TrialConfig())))
     files = [f for s in SETTINGS + ("transfer",) for f in (RESULTS / s).glob("*.json")
              if f.name != "summary.json"]
-    assert len(files) == 13
+    assert len(files) == 19
     for f in files:
         d = json.loads(f.read_text())
         cell = d.get("world", {}).get("cell")
@@ -432,7 +432,7 @@ def test_strong_tables_are_the_committed_run(headline):
         assert md in DOC, md.splitlines()[2]
 
 
-@pytest.mark.parametrize("setting", ("alpha",))
+@pytest.mark.parametrize("setting", ("alpha", "core_set", "loss", "schedule"))
 def test_ablation_tables_are_the_committed_runs(headline, setting):
     assert gl.comparisons_markdown(headline[setting]) in DOC
 
@@ -566,3 +566,30 @@ def test_transfer_prose_quoted(transfer):
     low = min(comps, key=lambda x: x["pvalue_holm"])
     assert low["name"] == "heavy: sern - egreedy, round 5"
     assert (round(low["pvalue_holm"], 2), _pct(low["mean"]), _pct(low["half"])) == (0.48, -5.2, 4.1)
+
+
+def test_other_ablations_prose_quoted(headline):
+    lo = headline["loss"]
+    l1 = _c(lo, "final_round", "loss=l1 − loss=bce, fixed-pose, pooled")
+    assert [_pct(v) for v in (l1["mean"], l1["lower"], l1["upper"])] == [-12.9, -21.4, -4.4]
+    assert l1["resolved"] and round(l1["pvalue_holm"], 2) == 0.03
+    assert sum(c["resolved"] for fam in ("core_set", "schedule", "alpha") for c in
+               headline[fam]["comparisons"]["final_round"]) == 0
+    assert [c["resolved"] for c in lo["comparisons"]["final_round"]] == [True, False]
+    run = lo["runs"]["loss=l1"]["policies_pooled"]["sern"]
+    assert (_pct(run["lowvar_by_round"][-1]), _pct(run["lowvar_by_round"][0])) == (77.4, 78.1)
+    ex = lo["comparisons"]["explore_success"][0]
+    assert (_pct(ex["mean"]), ex["resolved"]) == (-5.8, True)
+    cs = headline["core_set"]
+    assert [_pct(_c(cs, "final_round", f"core={k} − core=dpp, fixed-pose, pooled")[f])
+            for k in ("none", "random") for f in ("mean", "half")] == [3.0, 6.7, 1.2, 6.7]
+    sc = headline["schedule"]
+    d = _c(sc, "final_round", "sern − sern_log, fixed-pose, pooled")
+    assert (_pct(d["mean"]), d["resolved"]) == (1.5, False)
+    ex = sc["comparisons"]["explore_success"][0]
+    assert (_pct(ex["mean"]), ex["resolved"]) == (7.2, True)
+    # the CPU reference of the core-set and loss ablations is the Table I run's SERN, bit for bit
+    ref = gl.load_results(RESULTS / "core_set")["core=dpp"]
+    paper = gl.load_results(RESULTS / "paper")["paper"]
+    for f in ("lowvar_eval", "paper_eval"):
+        assert np.array_equal(ref[f][:, :, 0], paper[f][:, :, 0])

@@ -55,7 +55,7 @@ from sern_jax import io, timing
 
 __all__ = ["BanditWorkload", "BanditSetup", "BENCH_POLICIES", "bandit_config", "bandit_setup",
            "bandit_memory_bytes", "bandit_benchmark", "numpy_reference", "naive_jax_bandit",
-           "mean_se"]
+           "mean_se", "smpybandits_thompson", "smpybandits_reference"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +75,7 @@ class BanditWorkload:
     policy: str = "softmax"  # or "thompson"
     naive_repeats: int = 1  # timed runs of the naive jit(vmap(scan)) peer (0 skips it)
     summary_repeats: int = -1  # timed runs of run_seeds(summary=True) (-1: repeats; 0 skips)
+    smpybandits_seeds: int = 0  # seeds of SMPyBandits' Thompson (policy thompson; 0 skips)
 
 
 BENCH_POLICIES = ("softmax", "thompson")
@@ -101,7 +102,7 @@ def bandit_memory_bytes(w: BanditWorkload) -> int:
 
     config, _ = bandit_config(w)
     return (w.seeds * executor.bytes_per_seed(config)
-            + w.numpy_seeds * (4 * w.arms + 64) * 8)
+            + (w.numpy_seeds + w.smpybandits_seeds) * (4 * w.arms + 64) * 8)
 
 
 class BanditSetup(NamedTuple):
@@ -267,6 +268,68 @@ def mean_se(x: np.ndarray) -> tuple[float, float]:
     return float(x.mean()), float(x.std(ddof=1) / np.sqrt(x.size)) if x.size > 1 else 0.0
 
 
+def smpybandits_thompson():
+    """SMPyBandits' ``Policies.Thompson`` class, or ImportError naming what to install.
+
+    SMPyBandits 0.9.7 (its last release, 2019) imports ``scipy.special.btdtri`` at module
+    level, which SciPy has since removed; it is set here to its equal,
+    ``scipy.special.betaincinv`` (the Beta quantile; Thompson's ``sample`` does not use it). The
+    library's import-time notes on numba go to stderr so ``--json`` stays one line.
+    """
+    import contextlib
+    import sys
+
+    import scipy.special
+
+    if not hasattr(scipy.special, "btdtri"):
+        scipy.special.btdtri = scipy.special.betaincinv
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            from SMPyBandits.Policies import Thompson
+    except ImportError as e:
+        raise ImportError(f"SMPyBandits is not importable ({e}); pip install SMPyBandits "
+                          f"seaborn pandas") from e
+    return Thompson
+
+
+def smpybandits_reference(num_seeds: int, num_arms: int, horizon: int,
+                          checkpoints: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
+    """SMPyBandits' Thompson sampling on the NumPy reference's instance, one seed at a time.
+
+    The library has no seed axis: each seed is a ``Thompson(K)`` object whose ``choice()``
+    draws Beta(1 + S, 1 + F) for every arm with ``numpy.random.beta`` (the global stream,
+    seeded ``seed + i``) and plays an argmax (ties at random), and ``getReward`` updates the
+    posterior. Means are the NumPy reference's (the first ``num_seeds`` rows of its
+    ``default_rng(seed)`` U[0,1] draw), Bernoulli rewards come from ``default_rng(seed + 1)``.
+
+    Returns:
+      dict of ``regret`` [S, G] (realised: best mean − played mean, summed) and ``counts``
+      [S, G, K].
+    """
+    thompson = smpybandits_thompson()
+    means = np.random.default_rng(seed).random((num_seeds, num_arms), dtype=np.float32)
+    reward_rng = np.random.default_rng(seed + 1)
+    grid = {int(t): g for g, t in enumerate(checkpoints)}
+    regret_out = np.zeros((num_seeds, len(grid)), np.float64)
+    counts_out = np.zeros((num_seeds, len(grid), num_arms), np.int64)
+    for i in range(num_seeds):
+        np.random.seed((seed + i) % 2**32)
+        policy = thompson(num_arms)
+        policy.startGame()
+        mu = means[i].astype(np.float64)
+        best = mu.max()
+        counts = np.zeros(num_arms, np.int64)
+        regret = 0.0
+        for t in range(1, horizon + 1):
+            arm = int(policy.choice())
+            policy.getReward(arm, float(reward_rng.random() < mu[arm]))
+            counts[arm] += 1
+            regret += best - mu[arm]
+            if t in grid:
+                regret_out[i, grid[t]] = regret
+                counts_out[i, grid[t]] = counts
+    return {"regret": regret_out, "counts": counts_out}
+
 # ----------------------------------------------------------------------------- the paths
 # Each returns (the path's JSON entry, its outputs [S, ...] as NumPy or None).
 
@@ -384,6 +447,22 @@ def _path_numpy(s: BanditSetup):
     return entry, t.result
 
 
+def _path_smpybandits(s: BanditSetup):
+    from sern_jax import simulate as sim
+
+    w = s.workload
+    grid = sim.checkpoint_times(s.config)
+    t = timing.time_calls(lambda: smpybandits_reference(w.smpybandits_seeds, w.arms, w.horizon,
+                                                        grid, seed=w.seed),
+                          w.repeats, warmup=0)
+    import SMPyBandits
+
+    entry = {"seeds": w.smpybandits_seeds, "seed_rounds_per_s": w.smpybandits_seeds
+             * w.horizon / t.median_s, "policy": "SMPyBandits.Policies.Thompson",
+             "version": getattr(SMPyBandits, "__version__", None), **t.stats()}
+    return entry, t.result
+
+
 # ----------------------------------------------------------------------------- the benchmark
 
 
@@ -415,6 +494,9 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         result["general"], general_out = _path_general(s)
     if w.numpy_seeds:
         result["numpy"], numpy_out = _path_numpy(s)
+    smpy_out = None
+    if w.smpybandits_seeds and w.policy == "thompson":
+        result["smpybandits"], smpy_out = _path_smpybandits(s)
 
     # ---- agreement of mean regret (different random streams: compare with standard errors)
     agree: dict[str, Any] = {}
@@ -448,6 +530,11 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         agree["numpy_se"] = nse
         agree["numpy_mean_regret_rb_T"] = mean_se(numpy_out["regret_rb"][:, -1])[0]
         agree["z_fast_vs_numpy"] = (fm - nm) / max(np.hypot(fse, nse), 1e-12)
+    if smpy_out is not None:
+        sm_m, sm_se = mean_se(smpy_out["regret"][:, -1])
+        agree["smpybandits_mean_regret_T"] = sm_m
+        agree["smpybandits_se"] = sm_se
+        agree["z_fast_vs_smpybandits"] = (fm - sm_m) / max(np.hypot(fse, sm_se), 1e-12)
     result["regret_agreement"] = agree
 
     # ---- headline
@@ -484,6 +571,11 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
                                   if "run_seeds_summary" in rates and "naive_jax" in result
                                   else None),
         "fast_speedup_vs_numpy": rates["fast"] / numpy_rate if numpy_rate else None,
+        # issue 20 (Thompson): SMPyBandits' Thompson on the same instance (--smpybandits-seeds)
+        "smpybandits_seed_rounds_per_s": (result["smpybandits"]["seed_rounds_per_s"]
+                                          if "smpybandits" in result else None),
+        "speedup_vs_smpybandits": (best_rate / result["smpybandits"]["seed_rounds_per_s"]
+                                   if "smpybandits" in result else None),
         "repeats": w.repeats,
         "general_repeats": w.general_repeats,
         "peak_rss_mb": io.peak_rss_mb(),

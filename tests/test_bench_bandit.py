@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from sern_jax.commands import main as cli
@@ -67,3 +68,37 @@ def test_bench_bandit_thompson_json(capsys):
 def test_bench_bandit_bad_input(argv, match, capsys):
     assert cli.main(["bench", "bandit", "--json", *argv]) == 2
     assert match in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv,match", [(["--smpybandits-seeds", "4"], "policy thompson"),
+                                         (["--policy", "thompson", "--smpybandits-seeds", "1"],
+                                          "smpybandits-seeds"),
+                                         (["--policy", "thompson", "--smpybandits-seeds", "-2"],
+                                          "smpybandits-seeds")])
+def test_bench_bandit_smpybandits_bad_input(argv, match, capsys):
+    assert cli.main(["bench", "bandit", "--json", *argv]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_bench_bandit_smpybandits_reference_or_a_named_refusal(capsys):
+    """SMPyBandits' Thompson beside ours when the library is installed; without it the flag is
+    refused in one line naming it and what to install (exit 2, before any compile)."""
+    from sern_jax import benchmarks
+
+    argv = ["bench", "bandit", "--json", "--policy", "thompson", "--seeds", "16", "--horizon",
+            "60", "--numpy-seeds", "0", "--repeats", "1", "--naive-repeats", "0",
+            "--general-repeats", "0", "--summary-repeats", "0", "--smpybandits-seeds", "3"]
+    try:
+        benchmarks.smpybandits_thompson()
+    except ImportError:
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err
+        assert "--smpybandits-seeds" in err and "pip install SMPyBandits" in err
+        return
+    assert cli.main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["smpybandits"]["policy"] == "SMPyBandits.Policies.Thompson"
+    assert result["smpybandits_seed_rounds_per_s"] > 0
+    out = benchmarks.smpybandits_reference(3, 4, 60, np.array([30, 60]), seed=5)
+    assert out["counts"][:, -1].sum(-1).tolist() == [60] * 3
+    assert np.all(out["regret"][:, -1] >= out["regret"][:, 0]) and np.all(out["regret"] >= 0)

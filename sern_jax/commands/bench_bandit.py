@@ -46,6 +46,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="timed runs of the naive jit(vmap(scan)) JAX peer (default 1; 0 skips)")
     p.add_argument("--summary-repeats", type=int, default=-1,
                    help="timed runs of run_seeds(summary=True) (-1: --repeats; 0 skips)")
+    p.add_argument("--smpybandits-seeds", type=int, default=0,
+                   help="seeds of SMPyBandits' Thompson on the same instance, one at a time "
+                        "(--policy thompson; needs SMPyBandits installed; default 0 skips)")
     p.set_defaults(func=run)
     return p
 
@@ -57,6 +60,7 @@ def _validate(args) -> None:
                              ("--general-repeats", args.general_repeats, 0),
                              ("--naive-repeats", args.naive_repeats, 0),
                              ("--summary-repeats", args.summary_repeats, -1),
+                             ("--smpybandits-seeds", args.smpybandits_seeds, 0),
                              ("--devices", args.devices, 0), ("--chunk", args.chunk, -1)):
         if value < low:
             raise ValueError(f"{name} must be >= {low}, got {value}")
@@ -66,8 +70,14 @@ def _validate(args) -> None:
         raise ValueError(f"--alpha must be finite and > 0, got {args.alpha}")
     if args.numpy_seeds == 1:
         raise ValueError("--numpy-seeds must be 0 (skip) or >= 2 (for a standard error)")
+    if args.smpybandits_seeds == 1:
+        raise ValueError("--smpybandits-seeds must be 0 (skip) or >= 2 (for a standard error)")
+    if args.smpybandits_seeds and args.policy != "thompson":
+        raise ValueError("--smpybandits-seeds needs --policy thompson (SMPyBandits' softmax "
+                         "is not SERN's, see the README)")
     for name, value, high in (("--arms", args.arms, 2**20), ("--seeds", args.seeds, 2**31 - 1),
                               ("--numpy-seeds", args.numpy_seeds, 2**31 - 1),
+                              ("--smpybandits-seeds", args.smpybandits_seeds, 2**31 - 1),
                               ("--repeats", args.repeats, 1000),
                               ("--general-repeats", args.general_repeats, 1000),
                               ("--naive-repeats", args.naive_repeats, 1000),
@@ -78,6 +88,13 @@ def _validate(args) -> None:
             raise ValueError(f"{name} must be <= {high}, got {value}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if args.smpybandits_seeds:
+        from sern_jax import benchmarks
+
+        try:
+            benchmarks.smpybandits_thompson()
+        except ImportError as e:
+            raise ValueError(f"--smpybandits-seeds: {e}") from None
 
 
 def _workload(args):
@@ -88,7 +105,7 @@ def _workload(args):
         repeats=args.repeats, numpy_seeds=args.numpy_seeds,
         general_repeats=args.general_repeats, devices=args.devices, chunk=args.chunk,
         seed=args.seed, policy=args.policy, naive_repeats=args.naive_repeats,
-        summary_repeats=args.summary_repeats)
+        summary_repeats=args.summary_repeats, smpybandits_seeds=args.smpybandits_seeds)
 
 
 def _check_memory(workload) -> None:
@@ -131,7 +148,8 @@ def _table(result: dict, w) -> str:
             ("fast", w.seeds, "fast_mean_regret_T"),
             ("naive_jax", w.seeds, "naive_jax_mean_regret_T"),
             ("general", w.seeds, "general_mean_regret_T"),
-            ("numpy", w.numpy_seeds, "numpy_mean_regret_T")]
+            ("numpy", w.numpy_seeds, "numpy_mean_regret_T"),
+            ("smpybandits", w.smpybandits_seeds, "smpybandits_mean_regret_T")]
     for name, seeds, regret in rows:
         if name not in result:
             continue

@@ -50,7 +50,7 @@ AXES = "[round 0..R, object, policy, seed]; round 0 = θ0 before learning"
 
 __all__ = ["SETTINGS", "runs_of", "per_seed_doc", "save_per_seed", "load_results",
            "summarise", "collect", "table1_markdown", "fixed_pose_markdown",
-           "pooled_markdown", "comparisons_markdown", "main"]
+           "pooled_markdown", "comparisons_markdown", "regret_markdown", "main"]
 
 
 def runs_of(setting: str, base):
@@ -354,13 +354,37 @@ def pooled_markdown(summary: dict, label: str) -> str:
 
 def comparisons_markdown(summary: dict, family: str = "final_round") -> str:
     """One family of paired comparisons: mean ± 95 % t half-width, the t interval's ends,
-    the two-sided p and its Holm adjustment over the family."""
+    the two-sided p and its Holm adjustment over the family (success differences in
+    percentage points; ``regret_total`` in expected successes)."""
     rows = summary["comparisons"][family]
-    lines = ["| comparison | difference (points) | 95 % t interval | p | Holm p |",
+    regret = family == "regret_total"
+    unit = "successes" if regret else "points"
+    lines = [f"| comparison | difference ({unit}) | 95 % t interval | p | Holm p |",
              "|---|---|---|---|---|"]
     for c in rows:
-        lines.append(f"| {_short(c['name'])} | {_pm(c)} | [{_pts(c['lower'])}, "
-                     f"{_pts(c['upper'])}] | {c['pvalue']:.3f} | {_holm_note(c)} |")
+        if regret:
+            diff = f"{c['mean'] + 0.0:+.1f} ± {c['half']:.1f}"
+            ends = f"[{c['lower'] + 0.0:+.1f}, {c['upper'] + 0.0:+.1f}]"
+        else:
+            diff, ends = _pm(c), f"[{_pts(c['lower'])}, {_pts(c['upper'])}]"
+        lines.append(f"| {_short(c['name'])} | {diff} | {ends} | {c['pvalue']:.3f} | "
+                     f"{_holm_note(c)} |")
+    return "\n".join(lines)
+
+
+def regret_markdown(summary: dict, label: str) -> str:
+    """Pseudo-regret per round (expected successes lost to the independent oracle's best
+    candidate over a round's exploration grasps; mean over seeds) and the run's total with
+    its 95 % Student-t interval over the seeds."""
+    run = summary["runs"][label]
+    r = run["rounds_done"]
+    lines = ["| object | policy | " + " | ".join(f"round {k}" for k in range(1, r + 1))
+             + f" | total ({r} rounds), 95 % t |", "|" + "---|" * (r + 3)]
+    for row in run["table"]:
+        tot = run["policies_pooled"][row["policy"]]["regret_total"][row["object"]]
+        lines.append(f"| {row['object']} | {row['policy']} | "
+                     + " | ".join(f"{v:.2f}" for v in row["pseudo_regret"])
+                     + f" | {tot['mean']:.1f} ± {tot['half']:.1f} |")
     return "\n".join(lines)
 
 

@@ -1,0 +1,35 @@
+"""The benchmark figures docs/NEURAL.md quotes are those of the committed JSON files of
+``sern bench neural --json`` (experiments/results/bench/neural_wheel_lints_*.json)."""
+
+import json
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "experiments" / "results" / "bench"
+
+
+def _load(name):
+    return json.loads((BENCH / name).read_text())
+
+
+def test_quoted_benchmark_figures_match_the_files():
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    t5000 = _load("neural_wheel_lints_2core_T5000.json")
+    t500 = _load("neural_wheel_lints_2core_T500.json")
+    h100 = _load("neural_wheel_lints_h100_T500.json")
+    assert t5000["workload"]["num_seeds"] == 1000 and t5000["workload"]["horizon"] == 5000
+    assert h100["workload"]["num_seeds"] == 100_000 and h100["machine"]["backend"] == "gpu"
+    b = t5000["batched"]
+    quoted = [f"{b['seed_rounds_per_s']:,.0f} seed-rounds/s: {b['seconds']:.1f} s wall, "
+              f"{b['cpu_seconds']:.0f} CPU-s",
+              f"{t5000['python_loop']['seed_rounds_per_s']:.0f} seed-rounds/s",
+              f"{t5000['speedup']:.0f}×",
+              f"{t500['batched']['seed_rounds_per_s']:,.0f} seed-rounds/s: "
+              f"{t500['batched']['seconds']:.1f} s wall",
+              f"{h100['batched']['seed_rounds_per_s']:,.0f} seed-rounds/s "
+              f"({h100['batched']['seconds']:.2f} s)",
+              f"{h100['batched_compile_s']:.1f} s",
+              f"{h100['batched']['seed_rounds_per_s'] / t500['batched']['seed_rounds_per_s']:.0f}× "
+              f"the 2-core figure"]
+    for q in quoted:
+        assert q in doc, q

@@ -102,3 +102,46 @@ def test_bench_bandit_smpybandits_reference_or_a_named_refusal(capsys):
     out = benchmarks.smpybandits_reference(3, 4, 60, np.array([30, 60]), seed=5)
     assert out["counts"][:, -1].sum(-1).tolist() == [60] * 3
     assert np.all(out["regret"][:, -1] >= out["regret"][:, 0]) and np.all(out["regret"] >= 0)
+
+
+def test_readme_thompson_figures_are_the_committed_bench_files():
+    """The README's Thompson paragraph quotes ranges over the committed 2-core bench runs."""
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    runs = {f.stem: json.loads(f.read_text()) for f in
+            (root / "experiments/results/bench").glob("bandit_thompson_2core_*.json")}
+    smpy = runs.pop("bandit_thompson_2core_smpy_1")
+    assert len(runs) == 6 and all(r["workload"]["policy"] == "thompson" for r in runs.values())
+
+    def span(values, scale=1e6, digits=2):
+        return f"{min(values) / scale:.{digits}f}–{max(values) / scale:.{digits}f}"
+
+    one = [r for r in runs.values() if r["device"]["num_devices"] == 1]
+    two = [r for r in runs.values() if r["device"]["num_devices"] == 2]
+    assert len(one) == len(two) == 3
+    loads = [x for r in runs.values() for x in (r["machine"]["loadavg_before"][0],
+                                                 r["machine"]["loadavg_after"][0])]
+    text = " ".join((root / "README.md").read_text().split())
+
+    def rates(rs, k):
+        return [r[k] for r in rs]
+
+    for quoted in (
+            f"load {span(loads, 1, 1)} on the 2 cores",
+            f"fast path {span(rates(one, 'fast_seed_rounds_per_s'))}M seed-rounds/s on one "
+            f"device and {span(rates(two, 'fast_seed_rounds_per_s'))}M on two",
+            f"`run_seeds` {span(rates(one + two, 'run_seeds_seed_rounds_per_s'))}M",
+            f"NumPy in the same process {span(rates(one + two, 'numpy_seed_rounds_per_s'))}M",
+            f"best path / NumPy {span(rates(one + two, 'speedup_vs_numpy'), 1, 1)}×",
+            f"{smpy['smpybandits_seed_rounds_per_s'] / 1e6:.3f}M seed-rounds/s, "
+            f"{smpy['speedup_vs_smpybandits']:.0f}× slower than the best JAX path "
+            f"({smpy['seed_rounds_per_s'] / 1e6:.2f}M)",
+            f"({smpy['smpybandits']['seeds']} seeds, load "
+            f"{min(smpy['machine']['loadavg_before'][0], smpy['machine']['loadavg_after'][0]):.1f}"
+            f"–{max(smpy['machine']['loadavg_before'][0], smpy['machine']['loadavg_after'][0]):.1f}",
+            f"mean regret at T {smpy['regret_agreement']['smpybandits_mean_regret_T']:.1f} "
+            f"against our {smpy['regret_agreement']['fast_mean_regret_T']:.1f} over "
+            f"{smpy['workload']['seeds']:,} seeds, z = "
+            f"{smpy['regret_agreement']['z_fast_vs_smpybandits']:.1f}"):
+        assert quoted in text, quoted

@@ -78,6 +78,8 @@ def runs_of(setting: str, base):
 
 
 def _arr(a) -> list:
+    """Rounded values; NaN (not measured) stored as -1 (load_results: only success
+    fractions and round 0 / disabled regret read -1 back as NaN)."""
     a = np.asarray(a, np.float64)
     return np.round(np.where(np.isfinite(a), a, -1.0), 6).tolist()
 
@@ -161,7 +163,16 @@ def load_results(results_dir) -> dict:
         doc["objects"] = names
         for f in FIELDS:
             a = np.concatenate([np.asarray(d[f], np.float64) for d in parts], axis=1)
-            doc[f] = np.where(a < 0, np.nan, a)
+            if f == "pseudo_regret":
+                # a pseudo-regret can be negative (the policy's expected value above the
+                # independent oracle's chosen candidate): not measured = accounting off, or
+                # round 0
+                if not doc.get("config", {}).get("regret_trials", 0):
+                    a = np.full(a.shape, np.nan)
+                a[:1] = np.nan
+                doc[f] = a
+            else:
+                doc[f] = np.where(a < 0, np.nan, a)  # success fractions: -1 = not measured
         doc["seconds"] = max(d["seconds"] for d in parts)
         doc["parts"] = [{"objects": d["objects"], "seconds": d["seconds"],
                          "command": d["command"], "machine": d["machine"]} for d in parts]

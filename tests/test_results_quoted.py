@@ -593,3 +593,36 @@ def test_other_ablations_prose_quoted(headline):
     paper = gl.load_results(RESULTS / "paper")["paper"]
     for f in ("lowvar_eval", "paper_eval"):
         assert np.array_equal(ref[f][:, :, 0], paper[f][:, :, 0])
+
+
+def test_regret_accounting_quoted(tmp_path):
+    s = _rebuilt("regret", tmp_path)
+    assert json.loads((RESULTS / "regret" / "summary.json").read_text()) == s
+    assert gl.regret_markdown(s, "regret") in DOC
+    assert gl.comparisons_markdown(s, "regret_total") in DOC
+    d = json.loads((RESULTS / "regret" / "regret.json").read_text())
+    assert (d["config"]["regret_trials"], d["config"]["regret_grasps"]) == (4, 2)
+    assert round(d["seconds"]) == 690
+    assert d["theta0_digest"] == __import__("sern_jax.grasp.artifacts", fromlist=["x"]
+                                            ).load_theta0().fingerprint
+    pr = gl.load_results(RESULTS / "regret")["regret"]["pseudo_regret"]
+    assert int((pr[1:] < 0).sum()) == 65 and pr[1:].size == 225
+    rows = {(r["object"], r["policy"]): r["pseudo_regret"] for r in s["runs"]["regret"]["table"]}
+    tri = [rows[("triangular_prism", p)] for p in ("sern", "egreedy", "greedy")]
+    assert sorted(round(r[0]) for r in tri) == [9, 9, 9]
+    assert (round(min(r[1] for r in tri)), round(max(r[1] for r in tri))) == (14, 15)
+    assert round(max(v for r in tri for v in r[2:]), 1) == 5.5
+    tot = {k: v["regret_total"] for k, v in s["runs"]["regret"]["policies_pooled"].items()}
+    others = [tot[p][o]["mean"] for p in tot for o in ("tless_part_a", "detergent_bottle")]
+    assert (round(min(others), 1), round(max(others), 1)) == (0.4, 9.2)
+    fam = s["comparisons"]["regret_total"]
+    assert all(c["mean"] > 0 for c in fam) and not any(c["resolved"] for c in fam)
+    assert (round(min(c["mean"] for c in fam), 1), round(max(c["mean"] for c in fam), 1)) == (
+        0.2, 6.3)
+    low = min(fam, key=lambda c: c["pvalue_holm"])
+    assert gl._short(low["name"]) == "sern − greedy, triangular_prism"
+    assert (round(low["pvalue_holm"], 2), round(low["mean"], 1), round(low["half"], 1)) == (
+        0.33, 6.3, 6.5)
+    ex = {gl._short(c["name"]): c for c in s["comparisons"]["explore_success"]}
+    assert (_pct(ex["sern − greedy"]["mean"]), _pct(ex["sern − greedy"]["half"])) == (-1.7, 3.1)
+    assert not any(c["resolved"] for c in ex.values())

@@ -118,3 +118,16 @@ def test_transfer_worlds():
     assert (gs.THETA0_6N_DIR / "theta0.msgpack").exists()
     with pytest.raises(ValueError, match="unknown transfer cell"):
         gs.transfer_world("moon")
+
+
+def test_negative_pseudo_regret_is_kept_and_round_0_is_not_measured(tmp_path):
+    lv = np.full((3, 1, 1, 2), 0.5)
+    d = _doc("regret", ["a"], ["a"], ["sern"], lv, config={"regret_trials": 4})
+    pr = np.array([[[[-1.0, -1.0]]], [[[-0.25, 1.5]]], [[[-1.0, 0.5]]]])  # -1: a real value
+    d["pseudo_regret"] = pr.tolist()
+    gl.save_per_seed(tmp_path / "regret.json", d)
+    got = gl.load_results(tmp_path)["regret"]["pseudo_regret"]
+    assert np.isnan(got[0]).all() and np.array_equal(got[1:], pr[1:])
+    d["config"] = {"regret_trials": 0}  # accounting off: nothing was measured
+    gl.save_per_seed(tmp_path / "regret.json", d)
+    assert np.isnan(gl.load_results(tmp_path)["regret"]["pseudo_regret"]).all()

@@ -541,6 +541,11 @@ def main(argv=None) -> int:
         if args.only:
             run_dir = run_dir.with_name(run_dir.name + "." + "+".join(chosen))
         fname = _file_name(label0, chosen, all_objects)
+        # with --labels, write only the folders asked for: a call for alpha=0.05 must not
+        # overwrite core=dpp / loss=bce files made by another call, and same_run_as names
+        # exactly the folders this call wrote (never a sibling written by a different run)
+        if args.labels:
+            group = [g for g in group if g[1] in want or f"{g[0]}/{g[1]}" in want]
         shared = [f"{st}/{lb}" for st, lb, _ in group]
         targets = [{"file": (f"{st}/" if args.setting == "ablations" else "")
                     + _file_name(lb, chosen, all_objects), "label": lb, "setting": st,

@@ -109,9 +109,14 @@ def test_readme_thompson_figures_are_the_committed_bench_files():
     import pathlib
 
     root = pathlib.Path(__file__).resolve().parents[1]
-    runs = {f.stem: json.loads(f.read_text()) for f in
-            (root / "experiments/results/bench").glob("bandit_thompson_2core_*.json")}
-    smpy = runs.pop("bandit_thompson_2core_smpy_1")
+    bench = root / "experiments/results/bench"
+    runs = {f.stem: json.loads(f.read_text()) for pattern in ("one", "two")
+            for f in bench.glob(f"bandit_thompson_2core_{pattern}_*.json")}
+    smpy = json.loads((bench / "bandit_thompson_2core_smpy_1.json").read_text())
+    low = [json.loads((bench / f"bandit_thompson_2core_low_{i}.json").read_text())
+           for i in (1, 2, 3)]
+    low_loads = [x for r in low for x in (r["machine"]["loadavg_before"][0],
+                                          r["machine"]["loadavg_after"][0])]
     assert len(runs) == 6 and all(r["workload"]["policy"] == "thompson" for r in runs.values())
 
     def span(values, scale=1e6, digits=2):
@@ -134,6 +139,17 @@ def test_readme_thompson_figures_are_the_committed_bench_files():
             f"`run_seeds` {span(rates(one + two, 'run_seeds_seed_rounds_per_s'))}M",
             f"NumPy in the same process {span(rates(one + two, 'numpy_seed_rounds_per_s'))}M",
             f"best path / NumPy {span(rates(one + two, 'speedup_vs_numpy'), 1, 1)}×",
+            f"(load {span(low_loads, 1, 1)}; one device, two, one): best path "
+            + ", ".join(f"{r['seed_rounds_per_s'] / 1e6:.2f}M" for r in low[:2])
+            + f" and {low[2]['seed_rounds_per_s'] / 1e6:.2f}M seed-rounds/s, "
+            + ", ".join(f"{r['speedup_vs_numpy']:.1f}×" for r in low[:2])
+            + f" and {low[2]['speedup_vs_numpy']:.1f}× NumPy "
+            f"({span(rates(low, 'numpy_seed_rounds_per_s'))}M)",
+            f"fast path ran at {1e6 / low[0]['fast_seed_rounds_per_s']:.1f} µs "
+            f"({low[0]['fast_seed_rounds_per_s'] / 1e6:.2f}M/s on one device",
+            f"two host devices gave {low[1]['fast_seed_rounds_per_s'] / 1e6:.2f}M at load "
+            f"{min(low[1]['machine']['loadavg_before'][0], low[1]['machine']['loadavg_after'][0]):.1f}"
+            f"–{max(low[1]['machine']['loadavg_before'][0], low[1]['machine']['loadavg_after'][0]):.1f}",
             f"{smpy['smpybandits_seed_rounds_per_s'] / 1e6:.3f}M seed-rounds/s, "
             f"{smpy['speedup_vs_smpybandits']:.0f}× slower than the best JAX path "
             f"({smpy['seed_rounds_per_s'] / 1e6:.2f}M)",

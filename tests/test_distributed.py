@@ -117,11 +117,13 @@ def test_cluster_doc_quotes_the_committed_scaling_runs():
             assert f"{r['efficiency']:.2f}" in doc, (name, n)
         assert f"{runs[1]['seconds'] / 6:.1f} s per object" in doc
         assert f"{runs[8]['objects_per_second']:.2f}" in doc
+        assert "load average of" in doc and f"{data['machine']['load_average_1m']:.1f}" in doc
     pinned = json.loads((results / "d0_weak_pinned_h100host.json").read_text())["runs"]
     one = pinned[0]
     assert one["task_cpu_seconds_sum"] == pytest.approx(one["task_seconds_sum"], rel=0.01)
     assert f"{one['task_seconds_min_median_max'][1]:.1f} s" in doc
     assert f"{pinned[2]['task_seconds_min_median_max'][1]:.1f} s" in doc
+    assert f"the tasks themselves {one['task_seconds_sum'] / 6:.1f} s per object" in doc
 
 
 def test_no_cluster_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):

@@ -128,10 +128,27 @@ def import_mjx_quietly() -> None:
 _MAX_TRIALS = 4096  # 64 candidates x 4096 trials = 262,144 grasps: minutes, ~1 GB
 
 
+def _check_arguments(args) -> None:
+    """The flags' own errors (one line naming the flag), before any import of MuJoCo or OpenGL:
+    a machine without a GL library still hears about a bad --trials first."""
+    if not 0 <= args.trials <= _MAX_TRIALS:
+        raise ValueError(
+            f"--trials must lie in [0, {_MAX_TRIALS}] (64 candidates x {args.trials} trials "
+            f"would be {64 * args.trials:,} simulated grasps), got {args.trials}")
+    if not 0 <= args.seed <= 2**32 - 1:
+        raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
+    if (args.object is None) == (args.mesh is None):
+        raise ValueError(
+            "give exactly one of OBJECT or --mesh PATH (see --help, --list)"
+        )
+
+
 def run(args) -> int:
     """Entry point of ``sern grasp show``; returns the exit code."""
     from sern_jax.grasp import pictures  # imports mujoco without OpenGL
 
+    if not args.list:  # pure argument errors first: they need neither MuJoCo nor OpenGL
+        _check_arguments(args)
     if not args.no_render and not args.list:  # the backend is loaded and checked before any work
         try:
             pictures.use_gl(None if args.gl == "auto" else args.gl)
@@ -143,19 +160,9 @@ def run(args) -> int:
     if args.list:
         print("\n".join(objects_lib.object_names()))
         return 0
-    if not 0 <= args.trials <= _MAX_TRIALS:
-        raise ValueError(
-            f"--trials must lie in [0, {_MAX_TRIALS}] (64 candidates x {args.trials} trials "
-            f"would be {64 * args.trials:,} simulated grasps), got {args.trials}")
-    if not 0 <= args.seed <= 2**32 - 1:
-        raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
     from sern_jax.commands import validate
 
     validate.out_dir(args.out)  # tried for real (made and removed), before any work
-    if (args.object is None) == (args.mesh is None):
-        raise ValueError(
-            "give exactly one of OBJECT or --mesh PATH (see --help, --list)"
-        )
     if args.mesh is not None:
         spec = objects_lib.load_mesh(args.mesh, units=args.mesh_units)
     elif str(args.object).lower().endswith((".obj", ".stl")):

@@ -47,6 +47,24 @@ def test_bad_arguments_raise_clearly(tmp_path):
         show.run(_parse(["box", "--trials", "-1", "--out", str(tmp_path)]))
 
 
+def test_flag_errors_come_before_the_gl_check(tmp_path, monkeypatch):
+    """On a machine without a GL library (the H100 machine without EGL), a bad flag is still
+    named first: the argument checks run before the backend is loaded. Control: with good
+    flags the GL failure itself is what the user hears."""
+    from sern_jax.grasp import pictures
+
+    def no_gl(backend):
+        raise RuntimeError("no GL here")
+
+    monkeypatch.setattr(pictures, "use_gl", no_gl)
+    with pytest.raises(ValueError, match="--trials"):
+        show.run(_parse(["box", "--trials", "-1", "--out", str(tmp_path)]))
+    with pytest.raises(ValueError, match="exactly one of OBJECT or --mesh"):
+        show.run(_parse(["--out", str(tmp_path)]))
+    with pytest.raises(ValueError, match="--gl auto: no GL here"):
+        show.run(_parse(["box", "--out", str(tmp_path)]))
+
+
 def test_show_writes_pictures_and_results(tmp_path):
     """End to end in a fresh process (MUJOCO_GL must be set before mujoco is imported)."""
     out = tmp_path / "show"

@@ -67,6 +67,12 @@ def tiny_dataset(tmp_path_factory):
 @pytest.fixture(scope="session")
 def tiny_theta0():
     """A θ0 made in the test: randomly initialised network and a random core set."""
+    return make_tiny_theta0()
+
+
+def make_tiny_theta0():
+    """The ``tiny_theta0`` fixture's θ0 (also what tests/grasp/data/make_learn_reference.py
+    runs, so the reference and the test start from one θ0)."""
     from sern_jax.grasp import artifacts
     from sern_jax.grasp import quality_net as qn
 

@@ -501,6 +501,22 @@ def test_learn_cli_subprocess_one_line_no_traceback(argv, match, tmp_path):
 REFERENCE = __import__("pathlib").Path(__file__).parent / "data" / "learn_reference.npz"
 
 
+def params_digests(res) -> dict[str, str]:
+    """SHA-256 of each (policy, seed) copy's final network parameters in a ``runner.run``
+    result, keyed "policy/seed" (the reference file's ``params_digest``)."""
+    import hashlib
+
+    digests = {}
+    for q, name in enumerate(CONFIG.policies):
+        leaves = jax.tree.leaves(res["states"][q].params)
+        for s in range(CONFIG.num_seeds):
+            h = hashlib.sha256()
+            for leaf in leaves:
+                h.update(np.ascontiguousarray(np.asarray(leaf)[0, s]).tobytes())
+            digests[f"{name}/{s}"] = h.hexdigest()
+    return digests
+
+
 def test_same_results_as_the_pre_refactor_runner(run_a):
     """The learners behind the interface reproduce the pre-refactor online.run (commit
     2b20d9d) bit for bit on CONFIG: every figure, the table, the data sets and each copy's
@@ -508,7 +524,6 @@ def test_same_results_as_the_pre_refactor_runner(run_a):
     the 6 N trial; the 20 N trial (2026-11-24) changes every outcome, so it was re-derived
     with tests/grasp/data/make_learn_reference.py from the runner that had matched it: now
     a regression pin of the runner."""
-    import hashlib
     import json
 
     res, _, _ = run_a
@@ -518,14 +533,12 @@ def test_same_results_as_the_pre_refactor_runner(run_a):
     old_table = json.loads(str(ref["table"]))
     assert [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]] \
         == old_table
-    digests = json.loads(str(ref["params_digest"]))
+    want_digests = json.loads(str(ref["params_digest"]))
+    got_digests = params_digests(res)
     for q, name in enumerate(CONFIG.policies):
         state = res["states"][q]
         for s in range(CONFIG.num_seeds):
-            h = hashlib.sha256()
-            for leaf in jax.tree.leaves(state.params):
-                h.update(np.ascontiguousarray(np.asarray(leaf)[0, s]).tobytes())
-            assert h.hexdigest() == digests[f"{name}/{s}"], (name, s)
+            assert got_digests[f"{name}/{s}"] == want_digests[f"{name}/{s}"], (name, s)
         for got, want in ((state.buffer.reward, "buffer_label"),
                           (state.buffer.weight, "buffer_weight")):
             np.testing.assert_array_equal(np.asarray(got)[0, :, :CONFIG.horizon],

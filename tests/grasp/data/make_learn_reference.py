@@ -10,56 +10,32 @@ checked bit for bit against 2b20d9d under the old trial). Run from the repositor
     python tests/grasp/data/make_learn_reference.py
 """
 
-import hashlib
 import json
 import sys
 import tempfile
 from pathlib import Path
 
-import jax
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
-from sern_jax.grasp import artifacts, objects, runner  # noqa: E402
-from sern_jax.grasp import quality_net as qn  # noqa: E402
-from tests.grasp.conftest import CORE_K  # noqa: E402
-from tests.grasp.test_runner import CONFIG, OBJECT  # noqa: E402
-
-
-def tiny_theta0():
-    """The conftest fixture ``tiny_theta0``, made the same way."""
-    network = qn.make_quality_network()
-    params = network.init(jax.random.key(0))
-    s = network.config.crop_size
-    rng = np.random.default_rng(0)
-    core = {}
-    for kind in ("dpp", "random"):
-        core[f"{kind}_image"] = rng.normal(0.0, 0.01, (CORE_K, s, s)).astype(np.float32)
-        core[f"{kind}_depth"] = rng.uniform(0.55, 0.6, CORE_K).astype(np.float32)
-        core[f"{kind}_label"] = (rng.random(CORE_K) < 0.5).astype(np.float32)
-        core[f"{kind}_index"] = np.arange(CORE_K)
-    return artifacts.Theta0(network, params, core, manifest={}, fingerprint="test",
-                            screen=None)
+from sern_jax.grasp import objects, runner  # noqa: E402
+from tests.grasp.conftest import make_tiny_theta0  # noqa: E402
+from tests.grasp.test_runner import CONFIG, OBJECT, params_digests  # noqa: E402
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as out:
-        res = runner.run(CONFIG, [objects.make_object(OBJECT)], out, theta0=tiny_theta0(),
+        res = runner.run(CONFIG, [objects.make_object(OBJECT)], out, theta0=make_tiny_theta0(),
                          progress=False, log=lambda *_: None)
     arrays = {name: np.asarray(getattr(res["results"], name))
               for name in res["results"]._fields}
     arrays["table"] = np.asarray(json.dumps(
         [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]]))
-    digests, labels, weights = {}, [], []
-    for q, name in enumerate(CONFIG.policies):
+    digests, labels, weights = params_digests(res), [], []
+    for q in range(len(CONFIG.policies)):
         state = res["states"][q]
-        for s in range(CONFIG.num_seeds):
-            h = hashlib.sha256()
-            for leaf in jax.tree.leaves(state.params):
-                h.update(np.ascontiguousarray(np.asarray(leaf)[0, s]).tobytes())
-            digests[f"{name}/{s}"] = h.hexdigest()
         labels.append(np.asarray(state.buffer.reward)[0, :, :CONFIG.horizon])
         weights.append(np.asarray(state.buffer.weight)[0, :, :CONFIG.horizon])
     arrays["params_digest"] = np.asarray(json.dumps(digests))

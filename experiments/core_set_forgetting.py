@@ -17,6 +17,8 @@ Saves ``results.json`` (per core set and seed) and ``config.json``.
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 from pathlib import Path
 
@@ -47,7 +49,7 @@ def main(argv=None) -> int:
     import optax
 
     from sern_jax import io
-    from sern_jax.grasp import artifacts, dataset, objects, pretrain
+    from sern_jax.grasp import artifacts, dataset, objects, pretrain, sim
     from sern_jax.grasp import quality_net as qn
 
     t0 = time.perf_counter()
@@ -111,6 +113,10 @@ def main(argv=None) -> int:
     out = Path(args.out)
     io.save_json(out / "results.json", results)
     io.save_json(out / "config.json", {
+        "command": "python -m experiments.core_set_forgetting " + " ".join(
+            sys.argv[1:] if argv is None else argv),
+        "machine": io.machine(), "load_average_end": list(os.getloadavg()),
+        "physics": sim.physics_settings(), "metadata": io.run_metadata(),
         "args": vars(args), "online_grasps": int(len(on_lab)),
         "online_success_rate": float(on_lab.mean()), "test_grasps": int(len(te_lab)),
         "d0_grasps": int(len(d0_lab)), "theta0": theta0.fingerprint,

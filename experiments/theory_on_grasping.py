@@ -37,6 +37,7 @@ context and seed); ``figures/make_theory_grasping_fig.py`` draws them.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -370,7 +371,10 @@ def main(argv=None) -> int:
             theory.thm4_crossing(k, summary["beta_ctx_median"], d2_deep, 1.0, 0.3))
     out = {"command": "python -m experiments.theory_on_grasping " + " ".join(
                sys.argv[1:] if argv is None else argv),
-           "machine": io.machine(), "config": vars(args), "ns": list(NS),
+           "machine": io.machine(), "config": vars(args),
+           "theta0_digest": theta0.fingerprint, "physics": sim_lib.physics_settings(),
+           "metadata": io.run_metadata(),
+           "load_average_end": list(os.getloadavg()), "ns": list(NS),
            "delta2_ms": list(ms), "summary": summary, "theory": consts,
            "seconds": time.perf_counter() - t0}
     io.save_json(out_dir / "results.json", out)

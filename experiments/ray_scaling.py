@@ -11,6 +11,21 @@ Two ways to measure, both on a local Ray started before the clock (as a cluster 
   ``0 .. N*per_worker - 1``); efficiency ``E(N) = T(1) / T(N)`` on equal per-worker work.
 * ``--mode strong``: the same ``--objects`` objects for every N; ``E(N) = T(1) / (N T(N))``.
 
+* ``--mode default-d0``: the default D0's size (``--objects 200 --poses 16``, one object per
+  shard) with ``--full-workers`` (default 8 and 4) workers, each run over every object, and one
+  worker over a systematic sample (every ``--sample-every``-th object, from object 0): the
+  one-worker run of the whole D0 (~30 min) does not fit one device call. The runs go at the
+  same time, each on a local Ray of its own, every worker pinned to a core of its own (13 of
+  the 16 cores for 8 + 4 + 1). The one-worker time of the whole D0 is *estimated* as
+
+      T1_est = sum_sample t1(i) * sum_all t8(i) / sum_sample t8(i)
+
+  (t1: the sample's task seconds on the one worker; t8: the task seconds of every object on the
+  largest run, whose ratio scales the sample to the whole D0 by the objects' own costs). It
+  counts task time only (no Ray start, no driver work), so it underestimates a real
+  one-worker run, and the efficiencies ``E(N) = T1_est / (N T(N))``, with T(N) the measured
+  wall time of the whole ``dataset.generate`` call, err low.
+
 Before the timed runs a one-object run fills the JAX compilation cache (``--cache``) that every
 worker reads. Each timed run writes its own directory; the shards of the objects that two runs
 share are compared by SHA-256 (the same bytes whatever N). Writes one JSON (command, machine,
@@ -47,7 +62,10 @@ def _digest(path: Path) -> str:
 
 
 def _run(n_objects: int, workers: int, poses: int, out: Path, cache: str,
-         pin: bool = True) -> dict:
+         pin: bool = True, sample: list[int] | None = None) -> dict:
+    """One timed run on a local Ray of ``workers`` CPUs: ``dataset.generate`` (the command's
+    path) over objects ``0 .. n_objects - 1``, or, with ``sample``, only those objects'
+    shards (``dataset.write_shard``, the same unit function, through ``run_units``)."""
     import ray
 
     from sern_jax import distributed
@@ -64,23 +82,40 @@ def _run(n_objects: int, workers: int, poses: int, out: Path, cache: str,
         return tasks
 
     t0 = time.perf_counter()
+    # a small object store: the tasks return a few numbers (shards go to disk), and several
+    # of these Rays may run at once on one host (--mode default-d0)
     ray.init(address="local", num_cpus=workers, include_dashboard=False,
-             logging_level="ERROR")
+             logging_level="ERROR", object_store_memory=512 * 2**20)
     t_init = time.perf_counter() - t0
     distributed.run_units = recording
+    ray_config = distributed.RayConfig(cache_dir=cache, pin_cores=pin)
     try:
         t0 = time.perf_counter()
-        summary = dataset.generate(config, out, progress=False, log=lambda s: None,
-                                   ray=distributed.RayConfig(cache_dir=cache, pin_cores=pin))
+        if sample is None:
+            summary = dataset.generate(config, out, progress=False, log=lambda s: None,
+                                       ray=ray_config)
+        else:
+            out.mkdir(parents=True, exist_ok=True)
+            specs = dataset.dataset_objects(config)
+            paths = dataset.shard_paths(out, config)
+            recording([distributed.Unit(paths[i].name, dataset.write_shard,
+                                        (config, i, specs[i:i + 1], str(out.resolve())))
+                       for i in sample], ray_config, out, log=lambda s: None,
+                      progress=False, desc="shards")
+            summary = {"labelled_grasps": int(sum(
+                _load_npz(paths[i])["valid"].sum() for i in sample))}
         seconds = time.perf_counter() - t0
     finally:
         distributed.run_units = run_units
         ray.shutdown()
-    hashes = {p.name: _digest(p) for p in dataset.shard_paths(out, config)}
+    hashes = {p.name: _digest(p) for p in dataset.shard_paths(out, config) if p.exists()}
     per_task = sorted(t["seconds"] for t in tasks.values())
-    return {"workers": workers, "objects": n_objects, "poses": poses, "pin_cores": pin,
+    return {"workers": workers, "objects": n_objects if sample is None else len(sample),
+            "sample": sample, "poses": poses, "pin_cores": pin,
             "seconds": seconds, "ray_init_seconds": t_init,
             "labelled_grasps": summary["labelled_grasps"],
+            "task_seconds": {name: t["seconds"] for name, t in sorted(tasks.items())},
+            "cores": sorted({c for t in tasks.values() for c in (t["cores"] or [])}),
             "task_seconds_sum": sum(per_task),
             "task_seconds_min_median_max": [per_task[0], per_task[len(per_task) // 2],
                                             per_task[-1]],
@@ -90,12 +125,136 @@ def _run(n_objects: int, workers: int, poses: int, out: Path, cache: str,
             "shard_sha256": hashes}
 
 
+def _load_npz(path: Path) -> dict:
+    from sern_jax import io
+
+    return io.load_npz(path)
+
+
+def _child(args) -> int:
+    """One run of ``--mode default-d0`` in a process (and a local Ray) of its own."""
+    sample = None
+    if args.child_sample:
+        sample = list(range(0, args.objects, args.child_sample))
+    r = _run(args.objects, args.child_workers, args.poses, args.child_out, args.cache,
+             sample=sample)
+    Path(args.child_json).write_text(json.dumps(r))
+    print(f"run of {r['workers']} worker(s) over {r['objects']} objects: {r['seconds']:.1f} s "
+          f"(task seconds {r['task_seconds_sum']:.1f}); wrote {args.child_json}", flush=True)
+    return 0
+
+
+def _child_json(args, name: str) -> Path:
+    """Where a run of ``--mode default-d0`` writes its figures: beside ``--json-out`` (so a
+    run that finished is kept when a later one does not), else under ``--out``."""
+    folder = args.json_out.parent if args.json_out else args.out
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder / f"{name}.json"
+
+
+def _default_d0(args, argv, cache: str, started: float) -> int:
+    """The default D0 at ``--full-workers`` workers and a one-worker sample, all at once."""
+    import subprocess
+
+    from sern_jax import io
+
+    full = [int(w) for w in args.full_workers.split(",") if w]
+    if not full or any(w < 2 for w in full):
+        raise SystemExit("--full-workers: worker counts >= 2")
+    oversubscribed = sum(full) + 1 > (os.cpu_count() or 1)
+    if oversubscribed:  # the pins then fail for some workers, which run unpinned
+        print(f"note: {sum(full) + 1} workers on {os.cpu_count()} cores: oversubscribed, "
+              "not a scaling measurement", flush=True)
+    warm = _run(1, 1, args.poses, args.out / "warmup", cache)  # fills the compile cache
+    print(f"warm-up (1 object, fills the compile cache): {warm['seconds']:.1f} s", flush=True)
+    load_start = os.getloadavg()
+    procs = []
+    plan = [(n, 0) for n in full] + [(1, args.sample_every)]
+    for n, every in plan:
+        name = f"workers{n}" + (f"-every{every}" if every else "")
+        child = [sys.executable, "-m", "experiments.ray_scaling", "--child-json",
+                 str(_child_json(args, name)), "--child-workers", str(n), "--child-out",
+                 str(args.out / name), "--child-sample", str(every), "--objects",
+                 str(args.objects), "--poses", str(args.poses), "--cache", cache]
+        procs.append((name, subprocess.Popen(child)))
+    for name, proc in procs:
+        if proc.wait() != 0:
+            raise SystemExit(f"run {name} failed (exit {proc.returncode})")
+    load_end = os.getloadavg()
+    runs = [json.loads(_child_json(args, name).read_text()) for name, _ in procs]
+    by = {(r["workers"], r["sample"] is not None): r for r in runs}
+    largest = by[(max(full), False)]
+    one = by[(1, True)]
+    names = list(one["task_seconds"])
+    t8_all = sum(largest["task_seconds"].values())
+    t8_sample = sum(largest["task_seconds"][n] for n in names)
+    t1_sample = sum(one["task_seconds"].values())
+    t1_est = t1_sample * t8_all / t8_sample
+    for r in runs:
+        if r["sample"] is None:
+            r["efficiency"] = t1_est / (r["workers"] * r["seconds"])
+        r["objects_per_second"] = r["objects"] / r["seconds"]
+    # the same object gives the same shard bytes whatever the run
+    mismatches = sorted({n for a in runs for b in runs for n, h in a["shard_sha256"].items()
+                         if n in b["shard_sha256"] and b["shard_sha256"][n] != h})
+    doc = {
+        "what": ("the default D0's size (objects x poses, one object per shard, seed 0) on "
+                 "local Rays of N pinned one-core workers; the N >= 2 runs cover every "
+                 "object, the one-worker run a systematic sample; the runs went at the same "
+                 "time on disjoint cores"),
+        "mode": "default-d0",
+        "efficiency_definition": (
+            "E(N) = T1_est / (N T(N)); T(N) the wall seconds of the whole dataset.generate "
+            "call over every object (worker start-up included, Ray start excluded); T1_est = "
+            "sum_sample t1 * sum_all tL / sum_sample tL, t1 the one-worker run's task "
+            "seconds, tL the task seconds of the largest run (task time only: a real "
+            "one-worker run would add its worker start and driver time, so E errs low)"),
+        "t1_estimate_seconds": t1_est,
+        "t1_sample_task_seconds": t1_sample,
+        "largest_run_task_seconds_all": t8_all,
+        "largest_run_task_seconds_sample": t8_sample,
+        "sample_task_slowdown_largest_vs_one": t8_sample / t1_sample,
+        "command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
+                             *(argv if argv is not None else sys.argv[1:])]),
+        "machine": io.machine(),
+        "load_average_1m_5m_15m_before_and_after": [list(load_start), list(load_end)],
+        "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
+        "versions": io.run_metadata()["versions"],
+        "ray_version": __import__("ray").__version__,
+        "warmup_seconds": warm["seconds"],
+        "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs],
+        "oversubscribed": oversubscribed,
+        "shards_identical_across_runs": not mismatches,
+        "shard_sha256": largest["shard_sha256"],
+        "total_seconds": time.perf_counter() - started,
+    }
+    for r in runs:
+        print(f"N={r['workers']} {r['objects']} objects: {r['seconds']:.1f} s"
+              + (f", efficiency {r['efficiency']:.3f}" if "efficiency" in r else
+                 f" (sample: task seconds {t1_sample:.1f})"), flush=True)
+    print(f"T1 estimate {t1_est:.1f} s; shards identical across runs: {not mismatches}")
+    if args.json_out:
+        io.save_json(args.json_out, doc)
+        print(f"wrote {args.json_out}")
+    return 0 if not mismatches else 1
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--workers", default="1,4,8", help="comma list of worker counts")
-    p.add_argument("--mode", choices=("weak", "strong"), default="weak")
+    p.add_argument("--mode", choices=("weak", "strong", "default-d0"), default="weak")
+    p.add_argument("--full-workers", default="8,4",
+                   help="default-d0: worker counts that run every object")
+    p.add_argument("--sample-every", type=int, default=8,
+                   help="default-d0: the one-worker run takes every k-th object")
+    for hidden in ("--child-json", "--child-out"):
+        p.add_argument(hidden, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--child-workers", type=int, default=1, help=argparse.SUPPRESS)
+    p.add_argument("--child-sample", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--per-worker", type=int, default=8, help="weak: objects per worker")
-    p.add_argument("--objects", type=int, default=16, help="strong: objects in every run")
+    p.add_argument("--objects", type=int, default=None,
+                   help="strong: objects in every run (default 16); default-d0: D0's "
+                        "objects (default 200, the default D0)")
     p.add_argument("--poses", type=int, default=16, help="poses per object (D0: 16)")
     p.add_argument("--unpinned", type=lambda t: [int(w) for w in t.split(",") if w],
                    default=[], help="worker counts to run again without core pinning")
@@ -104,6 +263,11 @@ def main(argv=None) -> int:
                    help="JAX compilation cache (default <out>/.jax_cache)")
     p.add_argument("--json-out", type=Path, default=None)
     args = p.parse_args(argv)
+    if args.objects is None:
+        args.objects = 200 if args.mode == "default-d0" else 16
+    if args.child_json:
+        args.child_out = Path(args.child_out)
+        return _child(args)
     workers = [int(w) for w in args.workers.split(",")]
     if 1 not in workers or any(w < 1 for w in workers):
         p.error("--workers must include 1 (the reference) and be positive")
@@ -111,6 +275,8 @@ def main(argv=None) -> int:
     from sern_jax import io
 
     started = time.perf_counter()
+    if args.mode == "default-d0":
+        return _default_d0(args, argv, cache, started)
     warm = _run(1, 1, args.poses, args.out / "warmup", cache)  # fills the compile cache
     print(f"warm-up (1 object, fills the compile cache): {warm['seconds']:.1f} s", flush=True)
     runs = []

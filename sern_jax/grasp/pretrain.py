@@ -47,6 +47,9 @@ __all__ = [
     "HARD_RULE",
     "is_hard",
     "best_candidate_estimates",
+    "best_candidate_lcb",
+    "HARD_RULES",
+    "LCB_LEVEL",
     "screen",
 ]
 
@@ -252,11 +255,67 @@ def best_candidate_estimates(select, valid, fresh) -> dict:
             else 0.0}
 
 
-def is_hard(row: dict) -> bool:
-    """The hard-set rule on a screen row: θ0's greedy success <= 60 % and the chosen best
-    candidate's success on fresh trials >= 80 % (``best_success`` where a row predates the
-    fresh trials)."""
-    best = row.get("best_success_fresh", row["best_success"])
+LCB_LEVEL = 0.95
+HARD_RULES = ("fresh", "lcb")
+
+
+def best_candidate_lcb(successes, trials, valid, level: float = LCB_LEVEL) -> dict:
+    """A lower confidence bound on the best candidate's success from the screening trials
+    alone (the alternative to fresh trials that issue 17 names).
+
+    Every valid (pose, candidate) gets a one-sided Clopper–Pearson lower bound at level
+    1 − (1 − level)/N, N the number of valid pairs (Bonferroni), so with probability at
+    least ``level`` all N bounds hold at once; then each pose's largest bound is at most
+    that pose's best true success (max_k LCB_k <= max_k r_k), and their mean over poses is
+    a lower bound on the mean best success. The price of choosing among N: a candidate
+    that succeeds in all of its m trials gets the bound ((1 − level)/N)^(1/m), e.g. 0.32 at
+    m = 8 and N = 8 × 64, so with 8 screening trials no object can reach 0.8 this way
+    (m >= 42 is needed for a perfect candidate); the fresh-trial rule has no such cost.
+
+    Args:
+      successes: [P, K] successes of each candidate (integers).
+      trials: trials per candidate (int or [P, K]).
+      valid: [P, K] bool.
+      level: simultaneous confidence level.
+
+    Returns:
+      ``best_success_lcb`` (mean over poses with a valid candidate of max_k LCB_k; 0.0 if
+      none) and ``lcb_level``.
+    """
+    from scipy import stats as sps
+
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level!r}")
+    valid = np.asarray(valid, bool)
+    k, m = np.broadcast_arrays(np.asarray(successes, np.float64),
+                               np.asarray(trials, np.float64))
+    if np.any(m[valid] < 1) or np.any(k[valid] < 0) or np.any(k[valid] > m[valid]):
+        raise ValueError("need 0 <= successes <= trials and trials >= 1 on valid candidates")
+    n_pairs = int(valid.sum())
+    if n_pairs == 0:
+        return {"best_success_lcb": 0.0, "lcb_level": float(level)}
+    alpha = (1.0 - level) / n_pairs
+    with np.errstate(invalid="ignore"):
+        lower = np.where(k > 0, sps.beta.ppf(alpha, np.maximum(k, 1), m - k + 1), 0.0)
+    lower = np.where(valid, lower, -np.inf).max(1)
+    return {"best_success_lcb": float(lower[np.isfinite(lower)].mean()),
+            "lcb_level": float(level)}
+
+
+def is_hard(row: dict, rule: str = "fresh") -> bool:
+    """The hard-set rule on a screen row: θ0's greedy success <= 60 % and the best
+    candidate's success >= 80 %, the best valued by ``rule``: ``"fresh"`` (default) the
+    chosen best candidate's success on fresh trials (``best_success`` where a row predates
+    the fresh trials); ``"lcb"`` the simultaneous lower confidence bound of
+    :func:`best_candidate_lcb` (``best_success_lcb``)."""
+    if rule == "fresh":
+        best = row.get("best_success_fresh", row["best_success"])
+    elif rule == "lcb":
+        if "best_success_lcb" not in row:
+            raise ValueError("this screen row has no best_success_lcb: re-run the screen")
+        best = row["best_success_lcb"]
+    else:
+        raise ValueError(f"rule must be one of {HARD_RULES}, got {rule!r}")
     return bool(row["greedy_success"] <= HARD_RULE["max_greedy_success"]
                 and best >= HARD_RULE["min_best_success"])
 
@@ -296,6 +355,7 @@ def _evaluate_objects(network, params, specs, root, num_poses, num_trials, backe
             "trials": int(num_trials),
         }
         if fresh_trials:
+            row.update(best_candidate_lcb(lc.successes, num_trials, lc.valid))
             fresh = _fresh_best(key_i, spec, lc, num_trials, fresh_trials, backend)
             row.update(best_candidate_estimates(lc.successes / num_trials, lc.valid, fresh))
             row["fresh_trials"] = int(fresh_trials)
@@ -330,7 +390,7 @@ HARD_RULE = {"max_greedy_success": 0.6, "min_best_success": 0.8,
 
 def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, seed: int = 0,
            backend: str = "native", progress: bool = True,
-           fresh_trials: int | None = None) -> list[dict]:
+           fresh_trials: int | None = None, rule: str = "fresh") -> list[dict]:
     """The hard-set rule on each object: θ0's greedy success and the best candidate's.
 
     An object is *hard* (``row["hard"]``) when, averaged over ``num_poses`` random resting
@@ -343,15 +403,21 @@ def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, see
     new, independent trials (default: as many as ``num_trials``): the maximum of 64 noisy
     frequencies is biased upward (64 candidates of true success 0.4 measured by 8 trials
     each show a maximum of about 0.8). ``best_success`` keeps the biased maximum for
-    comparison; the rule (:func:`is_hard`) uses ``best_success_fresh``.
+    comparison; the rule (:func:`is_hard`) uses ``best_success_fresh``. With
+    ``rule="lcb"`` it uses instead ``best_success_lcb``, a simultaneous 95 % lower
+    confidence bound from the screening trials alone (:func:`best_candidate_lcb`; every
+    row carries it, and ``hard_rule`` names the rule that set ``hard``).
     """
     fresh = num_trials if fresh_trials is None else fresh_trials
     if fresh < 1:
         raise ValueError(f"fresh_trials must be >= 1, got {fresh}")
+    if rule not in HARD_RULES:
+        raise ValueError(f"rule must be one of {HARD_RULES}, got {rule!r}")
     *_, rows = _evaluate_objects(network, params, specs, jax.random.key(seed), num_poses,
                                  num_trials, backend, progress, "screen", fresh_trials=fresh)
     for row in rows:
-        row["hard"] = is_hard(row)
+        row["hard"] = is_hard(row, rule)
+        row["hard_rule"] = rule
     return rows
 
 

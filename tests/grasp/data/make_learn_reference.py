@@ -8,6 +8,10 @@ script from the runner of the ``trial:`` commit (the runner itself unchanged; it
 checked bit for bit against 2b20d9d under the old trial). Run from the repository root:
 
     python tests/grasp/data/make_learn_reference.py
+
+Besides the bit-for-bit arrays it records the JAX version it ran under and a float64
+projection of each copy's final parameters, which the test compares within a tolerance
+when it runs under another JAX version (where the parameters' last bits move).
 """
 
 import json
@@ -15,6 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import jax
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -22,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 from sern_jax.grasp import objects, runner  # noqa: E402
 from tests.grasp.conftest import make_tiny_theta0  # noqa: E402
-from tests.grasp.test_runner import CONFIG, OBJECT, params_digests  # noqa: E402
+from tests.grasp.test_runner import CONFIG, OBJECT, params_digests, params_projections  # noqa: E402
 
 
 def main() -> None:
@@ -39,6 +44,8 @@ def main() -> None:
         labels.append(np.asarray(state.buffer.reward)[0, :, :CONFIG.horizon])
         weights.append(np.asarray(state.buffer.weight)[0, :, :CONFIG.horizon])
     arrays["params_digest"] = np.asarray(json.dumps(digests))
+    arrays["params_projection"] = params_projections(res)  # [Q, S, 9]
+    arrays["jax_version"] = np.asarray(jax.__version__)
     arrays["buffer_label"] = np.stack(labels, 1)[None]  # [1, S, Q, H]
     arrays["buffer_weight"] = np.stack(weights, 1)[None]
     path = Path(__file__).with_name("learn_reference.npz")

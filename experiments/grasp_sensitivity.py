@@ -1,33 +1,46 @@
 """Sensitivity of the policy comparison to the simulated world, and sim-to-sim transfer.
 
-The shipped θ0 was pretrained in one world A (``scene.SceneConfig()``: 6 N per finger, pad
-friction 0.3; ``sim.TrialConfig()``: object friction ~ U[0.3, 0.8]; no depth noise). Each
-cell of the grid is a world B that differs in
+The shipped θ0 was pretrained in world A, today's trial (since 2026-11-24, commit f5ac209):
+``scene.SceneConfig()`` (20 N per finger, a Robotiq 2F-85 at its lowest force setting),
+``sim.TrialConfig()`` (object friction ~ U[0.3, 0.8]), no depth noise. Each cell of the grid
+is a world B that differs in
 
-* the finger force: 6 N (A) or 20 N,
+* the finger force: 20 N (A) or 10 N (a weaker grip),
 * the object friction range: U[0.3, 0.8] (A) or U[0.2, 0.5] (slipperier objects),
 * the depth sensor: noise-free (A) or RealSense D435-like noise with missing pixels
   (``depth.CameraConfig(noise_model="realsense")``),
 
-and θ0 learns online there (the paper's protocol: the hard set, SERN / ε-greedy / greedy,
-5 rounds of 20 exploration + 5 evaluation grasps, the low-variance evaluation on fixed poses).
-Cell (6 N, U[0.3, 0.8], clean) is world A itself. Per cell the script saves each seed's
-results (small JSON: the low-variance and 5-grasp evaluations per round, object, policy and
-seed; exploration success), then ``summarise`` computes per cell the paired differences
-SERN − greedy and SERN − ε-greedy of the final round's low-variance success, pooled over the
-objects per seed, with Student-t intervals over seeds and Holm's correction over all the
-cells' comparisons reported together; and, for transfer, per policy how far θ0 falls in B
-against A (round 0) and how much of that online learning recovers by round 1 and round 5.
+and θ0 learns online there (the paper's protocol: today's hard set, SERN / ε-greedy /
+greedy, 5 rounds of 20 exploration + 5 evaluation grasps, the fixed-pose evaluation). Cell
+``20N_mu0.3-0.8_clean`` is world A itself. Each cell's name says its force, and each cell
+writes ``experiments.grasp_learning``'s per-seed format (θ0's digest, the trial and scene
+configurations, the command and the machine inside), so a file of another trial or θ0 is
+refused by ``summarise``; ``<out>/grid.json`` pins the grid's seeds, rounds, objects and θ0,
+and a ``cell`` or ``run`` with other settings in the same ``--out`` is refused (exit 2).
+Per cell, ``summarise`` computes the paired differences SERN − each peer of the final
+round's fixed-pose success, pooled over the objects per seed, with Student-t intervals over
+seeds and Holm's correction over every finished cell's comparisons together; and, for
+transfer, per policy how far θ0 falls in B against A (round 0) and how much of that online
+learning recovers by round 1 and round 5.
 
     python -m experiments.grasp_sensitivity run --seeds 10 --workers 8 \\
         --out runs/sensitivity                        # the grid, one process per cell
+    python -m experiments.grasp_sensitivity cell 10N_mu0.2-0.5_d435 --out runs/sensitivity
     python -m experiments.grasp_sensitivity summarise runs/sensitivity
     python -m figures.make_sensitivity_fig runs/sensitivity
 
 ``run`` gives each worker an equal share of the machine's cores (``--workers``), stops
-workers still running at ``--deadline`` seconds (their cells are reported as not run), and
-writes ``<out>/<cell>.json`` per finished cell and ``<out>/summary.json``. (The grid's cells
-name their force explicitly; the committed grid was made under the previous 6 N trial and θ0.)
+workers still running at ``--deadline`` seconds, and writes ``<out>/<cell>.json`` per
+finished cell (a stopped cell resumes from its last finished round when rerun with the same
+command; ``python -m experiments.grasp_learning collect <out>/runs <out>`` writes the
+finished rounds of a stopped cell, marked ``stopped_early``, which ``summarise`` lists but
+leaves out of the comparisons) and ``<out>/summary.json``.
+
+The grid made under the previous trial (6 N per finger, its θ0 in
+``results/transfer/theta0_6N``; cells ``6N_*`` and ``20N_*``, the latter a 6 N network meeting
+a 20 N grip) is kept as a record in ``results/sensitivity_6N``, in its own older per-seed
+format; ``summarise`` reads it with the previous grid's cells (``CELLS_6N``) and refuses a
+directory that mixes the two formats.
 
 Sim-to-sim transfer over 20 rounds (``TRANSFER_CELLS``: world A itself, lower friction,
 heavier objects, D435 depth noise, a 6 N grip, MJX physics, and the previous trial's θ0
@@ -59,29 +72,41 @@ from pathlib import Path
 
 import numpy as np
 
-FORCES = {"6N": 6.0, "20N": 20.0}
+# Today's grid (the 20 N trial): world A = CELLS[0].
+FORCES = {"20N": 20.0, "10N": 10.0}
 FRICTIONS = {"mu0.3-0.8": (0.3, 0.8), "mu0.2-0.5": (0.2, 0.5)}
 NOISES = ("clean", "d435")
 CELLS = tuple(f"{f}_{m}_{n}" for f, m, n in itertools.product(FORCES, FRICTIONS, NOISES))
-WORLD_A = CELLS[0]  # 6N_mu0.3-0.8_clean: the world θ0 was pretrained in
+WORLD_A = CELLS[0]  # 20N_mu0.3-0.8_clean: the world the shipped θ0 was pretrained in
+GRID = "20N trial"  # grid.json's and every cell file's "grid"
+# The previous trial's grid (6 N θ0), a record in results/sensitivity_6N: its cells, in its
+# order, and its world A; its files have the older per-seed format (no "label").
+FORCES_6N = {"6N": 6.0, "20N": 20.0}
+CELLS_6N = tuple(f"{f}_{m}_{n}" for f, m, n in itertools.product(FORCES_6N, FRICTIONS, NOISES))
+WORLD_A_6N = CELLS_6N[0]  # 6N_mu0.3-0.8_clean
 PEERS = ("greedy", "egreedy")
 
-__all__ = ["CELLS", "WORLD_A", "TRANSFER_CELLS", "world", "transfer_world", "run_cell",
-           "run_transfer_cell", "summarise", "summarise_transfer", "transfer_markdown", "main"]
+__all__ = ["CELLS", "WORLD_A", "CELLS_6N", "WORLD_A_6N", "TRANSFER_CELLS", "world",
+           "transfer_world", "run_cell", "run_transfer_cell", "summarise",
+           "summarise_transfer", "sensitivity_markdown", "transfer_markdown", "main"]
 
 
 def world(cell: str):
-    """(ContextConfig, TrialConfig) of a cell name ``<force>_<friction>_<noise>``."""
-    from sern_jax.grasp import context, depth, scene, sim
+    """(ContextConfig, TrialConfig) of a cell name ``<force>_<friction>_<noise>``: today's
+    defaults with the cell's force, friction range and depth sensor. The previous grid's
+    cells (``CELLS_6N``) are accepted too: they differ from today's defaults in the same
+    three settings only where the name says so (their files record their own configs)."""
+    from sern_jax.grasp import context, sim
 
-    force, friction, noise = cell.split("_")
-    if force not in FORCES or friction not in FRICTIONS or noise not in NOISES:
+    force, friction, noise = (cell.split("_") + ["", "", ""])[:3]
+    if cell not in CELLS and cell not in CELLS_6N:
         raise ValueError(f"unknown cell {cell!r}; choose from {', '.join(CELLS)}")
-    ctx = context.ContextConfig(
-        scene=scene.SceneConfig(finger_force=FORCES[force]),
-        noise=noise == "d435",
-        camera=depth.CameraConfig(noise_model="realsense" if noise == "d435" else "dexnet"))
-    trial = sim.TrialConfig(friction_range=FRICTIONS[friction])
+    r = dataclasses.replace
+    ctx, trial = context.ContextConfig(), sim.TrialConfig()
+    ctx = r(ctx, scene=r(ctx.scene, finger_force={**FORCES_6N, **FORCES}[force]))
+    if noise == "d435":
+        ctx = r(ctx, noise=True, camera=r(ctx.camera, noise_model="realsense"))
+    trial = r(trial, friction_range=FRICTIONS[friction])
     return ctx, trial
 
 
@@ -101,38 +126,91 @@ def _machine() -> dict:
             "python": platform.python_version()}
 
 
+class GridMismatch(ValueError):
+    """``--out`` holds a grid made with other settings (seeds, rounds, objects, θ0)."""
+
+
+def _grid_settings(seeds: int, rounds: int, num_objects: int) -> dict:
+    from sern_jax.grasp import artifacts, sim
+
+    theta0 = artifacts.load_theta0()
+    return {"grid": GRID, "seeds": int(seeds), "rounds": int(rounds),
+            "objects": artifacts.hard_set(theta0, num_objects)["objects"],
+            "theta0_digest": theta0.fingerprint,
+            "physics_defaults": sim.physics_settings()}
+
+
+def check_grid(out: Path, seeds: int, rounds: int, num_objects: int,
+               write: bool = True) -> dict:
+    """Pins ``out/grid.json`` to these settings (written on first use); raises
+    :class:`GridMismatch` naming what differs when ``out`` holds another grid, or the
+    previous trial's files (no grid.json, per-seed files without a label)."""
+    from sern_jax import io
+
+    want = json.loads(json.dumps(_grid_settings(seeds, rounds, num_objects)))
+    f = Path(out) / "grid.json"
+    if f.exists():
+        have = io.load_json(f)
+        diff = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
+        if diff:
+            raise GridMismatch(f"--out {out} holds a grid made with other {', '.join(diff)} "
+                               "(choose another --out)")
+    else:
+        old = [p.name for p in Path(out).glob("*.json")
+               if p.name != "summary.json" and "label" not in io.load_json(p)]
+        if old:
+            raise GridMismatch(f"--out {out} holds the previous trial's grid ({old[0]}, ...); "
+                               "choose another --out")
+        if write:
+            io.save_json(f, want)
+    return want
+
+
 def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
              progress: bool = False) -> dict:
-    """Runs one cell and writes ``out/<cell>.json`` (per-seed results); returns it."""
+    """Runs (or resumes) one cell of today's grid; writes ``out/<cell>.json``
+    (``experiments.grasp_learning``'s per-seed format, with the world) and returns it.
+    A cell whose file already holds every round is not rerun."""
+    from . import grasp_learning
     from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, online
+    from sern_jax.grasp import artifacts, objects, runner
 
+    if cell not in CELLS:
+        raise ValueError(f"unknown cell {cell!r}; choose from {', '.join(CELLS)}")
     t0 = time.perf_counter()
+    out = Path(out)
+    grid = check_grid(out, seeds, rounds, num_objects)
+    target = out / f"{cell}.json"
+    if target.exists():
+        done = io.load_json(target)
+        if done.get("rounds_done") == rounds and not done.get("stopped_early"):
+            return done
     ctx, trial = world(cell)
     theta0 = artifacts.load_theta0()
-    hard = artifacts.hard_set(theta0, num_objects)
-    specs = [objects.make_object(n) for n in hard["objects"]]
-    config = online.OnlineConfig(num_seeds=seeds, rounds=rounds)
-    res = online.run(config, specs, out / "runs" / cell, theta0=theta0, progress=progress,
+    names = grid["objects"]
+    specs = [objects.make_object(n) for n in names]
+    config = runner.OnlineConfig(num_seeds=seeds, rounds=rounds)
+    command = (f"python -m experiments.grasp_sensitivity cell {cell} --out {out} "
+               f"--seeds {seeds} --rounds {rounds} --objects {num_objects}")
+    world_doc = {"grid": GRID, "grid_cell": cell,
+                 "finger_force_N": ctx.scene.finger_force,
+                 "friction_range": list(trial.friction_range),
+                 "depth_noise": ctx.camera.noise_model if ctx.noise else "none"}
+    run_dir = out / "runs" / cell
+    io.save_json(run_dir / "run_meta.json", {
+        "label": cell, "setting": "sensitivity", "objects": names, "all_objects": names,
+        "config": dataclasses.asdict(config), "command": command, "file": f"{cell}.json",
+        "theta0_dir": None, "trial_config": dataclasses.asdict(trial),
+        "scene_config": dataclasses.asdict(ctx.scene), "extra": {"world": world_doc}})
+    res = runner.run(config, specs, run_dir, theta0=theta0, progress=progress,
                      log=lambda *_: None, context_config=ctx, trial_config=trial)
-    r = res["results"]
-    rnd = lambda a: np.round(np.asarray(a, np.float64), 5).tolist()  # noqa: E731
-    doc = {
-        "cell": cell,
-        "world": {"finger_force_N": ctx.scene.finger_force,
-                  "friction_range": list(trial.friction_range),
-                  "depth_noise": ctx.camera.noise_model if ctx.noise else "none"},
-        "objects": hard["objects"], "policies": list(config.policies),
-        "seeds": seeds, "rounds": rounds,
-        "axes": "[round 0..R, object, policy, seed]; round 0 = θ0 before learning",
-        "lowvar_eval": rnd(r.lowvar_eval), "paper_eval": rnd(r.paper_eval),
-        "explore_success": rnd(np.nan_to_num(r.explore_success, nan=-1.0)),
-        "config": dataclasses.asdict(config),
-        "trial_counts": res["trial_counts"],
-        "seconds": round(time.perf_counter() - t0, 1),
-        "machine": _machine(),
-    }
-    io.save_json(out / f"{cell}.json", doc)
+    doc = grasp_learning.per_seed_doc(
+        res["results"], label=cell, setting="sensitivity", objects=names, all_objects=names,
+        config=config, rounds_done=rounds, seconds=time.perf_counter() - t0,
+        command=command, theta0=theta0, trial_config=trial, scene_config=ctx.scene,
+        extra={"world": world_doc, "timings": res["timings"],
+               "trial_counts": res["trial_counts"]})
+    grasp_learning.save_per_seed(target, doc)
     return doc
 
 
@@ -144,11 +222,141 @@ def _final_pooled(doc: dict, policy: str, metric: str = "lowvar_eval",
 
 
 def summarise(out: str | Path, level: float = 0.95) -> dict:
-    """Paired differences per cell (t over seeds, Holm over every cell's comparisons) and
-    the transfer table, from the saved ``<cell>.json`` files; writes ``summary.json``."""
-    from sern_jax import io, stats
+    """Paired differences per cell (t over seeds, Holm over every finished cell's
+    comparisons) and the transfer table, from the saved ``<cell>.json`` files; writes
+    ``summary.json``. Today's grid (per-seed files with a ``label``) or the previous
+    trial's (``results/sensitivity_6N``, the older format); a directory holding both, or
+    cells of another θ0, seeds, rounds, objects or world than its grid's, is refused."""
+    from sern_jax import io
 
     out = Path(out)
+    files = [f for f in sorted(out.glob("*.json")) if f.name not in ("summary.json",
+                                                                      "grid.json")]
+    kinds = {"label" in io.load_json(f) for f in files}
+    if not files:
+        raise ValueError(f"no cell results in {out}")
+    if kinds == {True, False}:
+        raise ValueError(f"{out} mixes today's cell files with the previous trial's "
+                         "(older format, no label): keep them in separate directories")
+    if kinds == {False}:
+        return _summarise_6N(out, level)
+    return _summarise_today(out, level)
+
+
+def _summarise_today(out: Path, level: float = 0.95) -> dict:
+    from . import grasp_learning
+    from sern_jax import io
+
+    docs = grasp_learning.load_results(out)
+    unknown = sorted(set(docs) - set(CELLS))
+    if unknown:
+        raise ValueError(f"{out}: {unknown} are not cells of today's grid {CELLS}")
+    docs = {c: docs[c] for c in CELLS if c in docs}
+    first = next(iter(docs.values()))
+    for cell, d in docs.items():
+        ctx, trial = world(cell)
+        want = json.loads(json.dumps({"setting": "sensitivity", "grid": GRID,
+                                      "trial_config": dataclasses.asdict(trial),
+                                      "scene_config": dataclasses.asdict(ctx.scene)}))
+        have = {"setting": d["setting"], "grid": (d.get("world") or {}).get("grid"),
+                "trial_config": d["trial_config"], "scene_config": d["scene_config"]}
+        bad = [k for k in want if want[k] != have[k]]
+        bad += [k for k in ("theta0_digest", "seeds", "rounds", "objects", "policies")
+                if d[k] != first[k]]
+        if bad:
+            raise ValueError(f"{out}/{cell}.json differs from its grid in {', '.join(bad)}: "
+                             "a cell of another trial, θ0 or run")
+    grid_file = out / "grid.json"
+    if grid_file.exists():
+        g = io.load_json(grid_file)
+        pinned = {"seeds": g["seeds"], "rounds": g["rounds"], "objects": g["objects"],
+                  "theta0_digest": g["theta0_digest"]}
+        if any(first[k] != v for k, v in pinned.items()):
+            raise ValueError(f"{out}: the cells differ from grid.json")
+    finished = {c: d for c, d in docs.items() if d["rounds_done"] == d["rounds"]}
+    stopped = {c: int(d["rounds_done"]) for c, d in docs.items() if c not in finished}
+    if not finished:
+        raise ValueError(f"no finished cell in {out} (stopped: {stopped})")
+    policies = first["policies"]
+    peers = [p for p in PEERS if p in policies] + [p for p in policies
+                                                    if p not in PEERS + ("sern",)]
+
+    def pooled(d, pol, r):
+        return d["lowvar_eval"][r, :, d["policies"].index(pol), :].mean(0)  # [S]
+
+    names, diffs = [], []
+    for cell, d in finished.items():
+        for peer in peers:
+            names.append(f"{cell}: sern - {peer}")
+            diffs.append(pooled(d, "sern", -1) - pooled(d, peer, -1))
+    comps = grasp_learning._comparisons(names, diffs)
+    cells = {}
+    for cell, d in finished.items():
+        per_policy = {}
+        for pol in policies:
+            by_round = d["lowvar_eval"][:, :, policies.index(pol), :].mean((1, 2))
+            per_policy[pol] = {
+                "lowvar_by_round": [float(v) for v in by_round],
+                "final": grasp_learning._ci(pooled(d, pol, -1)),
+                "final_minus_theta0": grasp_learning._ci(pooled(d, pol, -1)
+                                                         - pooled(d, pol, 0)),
+            }
+        cells[cell] = {
+            "world": d["world"], "seeds": d["seeds"], "rounds": d["rounds"],
+            "comparisons": {c["name"].split(": ")[1]: {k: v for k, v in c.items()
+                                                       if k != "name"}
+                            for c in comps if c["name"].startswith(cell + ":")},
+            "policies": per_policy, "theta0": grasp_learning._ci(pooled(d, policies[0], 0)),
+            "seconds": d["seconds"], "command": d["parts"][0]["command"],
+            "machine": d["parts"][0]["machine"]}
+    transfer = None
+    if WORLD_A in finished:
+        a0 = pooled(finished[WORLD_A], policies[0], 0)  # θ0 in A, per seed (policy-free)
+        transfer = {}
+        for cell, d in finished.items():
+            b0 = pooled(d, policies[0], 0)
+            gap = grasp_learning._ci(a0 - b0)
+            row = {"theta0_A": float(a0.mean()), "theta0_B": float(b0.mean()), "gap": gap,
+                   "policies": {}}
+            for pol in policies:
+                rec = {}
+                for r in (1, d["rounds"]):
+                    g = grasp_learning._ci(pooled(d, pol, r) - b0)
+                    rec[f"gain_round{r}"] = g
+                    rec[f"recovered_round{r}"] = (g["mean"] / gap["mean"]
+                                                  if gap["mean"] > 0.02 else None)
+                row["policies"][pol] = rec
+            transfer[cell] = row
+    summary = io.to_jsonable({
+        "grid": GRID, "objects": first["objects"], "seeds": first["seeds"],
+        "rounds": first["rounds"], "theta0_digest": first["theta0_digest"],
+        "metric": "final-round fixed-pose greedy success, mean over the objects, per seed",
+        "interval": (f"Student t over seeds (n - 1 dof), {level:.0%} per comparison; Holm "
+                     f"over all {len(comps)} comparisons of the finished cells "
+                     "(pvalue_holm, resolved)"),
+        "cells": cells,
+        "cells_stopped": stopped,
+        "cells_missing": [c for c in CELLS if c not in docs],
+        "sign_of_mean": {p: sorted({int(np.sign(round(c["comparisons"][f"sern - {p}"]
+                                                      ["mean"], 9)))
+                                    for c in cells.values()}) for p in peers},
+        "resolved": [c["name"] for c in comps if c["resolved"]],
+        "transfer": transfer,
+        "transfer_note": ("gap = θ0's pooled fixed-pose success in world A minus in B "
+                          "(round 0, paired by seed); gain_roundR = a policy's round-R "
+                          "success in B minus θ0's in B (per seed); recovered_roundR = mean "
+                          "gain / mean gap, only where the gap exceeds 2 points"),
+    })
+    io.save_json(out / "summary.json", summary)
+    return summary
+
+
+def _summarise_6N(out: Path, level: float = 0.95) -> dict:
+    """The previous trial's grid (``results/sensitivity_6N``, older per-seed format), as it
+    was summarised when it was made (its committed summary.json is this output)."""
+    from sern_jax import io, stats
+
+    CELLS, WORLD_A = CELLS_6N, WORLD_A_6N  # noqa: N806: the previous grid's
     docs = {c: io.load_json(out / f"{c}.json") for c in CELLS if (out / f"{c}.json").exists()}
     if not docs:
         raise ValueError(f"no cell results in {out}")
@@ -400,6 +608,43 @@ def transfer_markdown(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def grasp_learning_collect(out: Path) -> list:
+    """Per-seed files (``stopped_early``) of the grid's cells stopped before their last
+    round, from their checkpoints."""
+    from . import grasp_learning
+
+    return grasp_learning.collect(Path(out) / "runs", out) if (Path(out) / "runs").exists() \
+        else []
+
+
+def sensitivity_markdown(summary: dict) -> str:
+    """The grid's table docs/RESULTS.md prints (rebuilt by tests/test_results_quoted.py):
+    per finished cell θ0's and SERN's final fixed-pose success and SERN − each peer
+    (95 % t half-widths over seeds; Holm-adjusted p over every comparison of the table)."""
+    from .grasp_learning import _pm
+
+    cells = summary["cells"]
+    pols = next(iter(cells.values()))["policies"]
+    peers = [p for p in PEERS if p in pols] + [p for p in pols if p not in PEERS + ("sern",)]
+    names = {"greedy": "greedy", "egreedy": "ε-greedy"}
+    head = ["cell (force, friction, depth)", "θ0", f"SERN round {summary['rounds']}"]
+    for p in peers:
+        head += [f"SERN − {names.get(p, p)}", "Holm p"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for cell, c in cells.items():
+        force, mu, noise = cell.split("_")
+        lo, hi = mu[2:].split("-")
+        label = (f"{force[:-1]} N, U[{lo}, {hi}], {'D435' if noise == 'd435' else 'clean'}"
+                 + (" (world A)" if cell == WORLD_A else ""))
+        row = [label, f"{100 * c['theta0']['mean']:.1f} %",
+               f"{100 * c['policies']['sern']['final']['mean']:.1f} %"]
+        for p in peers:
+            comp = c["comparisons"][f"sern - {p}"]
+            row += [_pm(comp), f"{comp['pvalue_holm']:.2f}"]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
 def t_dict(ci) -> dict:
     return {"mean": round(ci.mean, 6), "half": round(ci.half, 6), "n": ci.n}
 
@@ -421,8 +666,25 @@ def _run_grid(args, transfer: bool = False) -> int:
     if ray is not None and args.deadline:
         raise SystemExit("--deadline applies to the worker processes, not --ray (stop the "
                          "run and rerun it: finished cells are kept)")
+    if not transfer:
+        try:  # the grid's settings pinned in out/grid.json (refuses another grid's --out)
+            check_grid(out, args.seeds, args.rounds, args.objects, write=False)
+        except GridMismatch as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     out.mkdir(parents=True, exist_ok=True)
-    todo = [c for c in cells if not (out / f"{c}.json").exists()]
+    if not transfer:
+        check_grid(out, args.seeds, args.rounds, args.objects)
+
+    def finished(c):
+        f = out / f"{c}.json"
+        if not f.exists():
+            return False
+        d = json.loads(f.read_text())
+        return d.get("rounds_done", d.get("rounds")) == d.get("rounds") and not d.get(
+            "stopped_early")
+
+    todo = [c for c in cells if not finished(c)]
     if ray is not None and todo:
         # the module by its package name (not __main__), which every worker imports
         import importlib
@@ -487,11 +749,15 @@ def _run_grid(args, transfer: bool = False) -> int:
                   f"{100 * c['gap']['mean']:+.1f}; gain at round {last}: " + ", ".join(parts))
         print(f"wrote {out / 'summary.json'} ({time.perf_counter() - t0:.0f} s)")
         return 0
+    for f in grasp_learning_collect(out):
+        print(f"wrote {f} from its last checkpoint (stopped early)", flush=True)
     summary = summarise(out)
     for cell, c in summary["cells"].items():
         parts = [f"{k} {100 * v['mean']:+.1f} ± {100 * v['half']:.1f}"
                  f"{' *' if v['resolved'] else ''}" for k, v in c["comparisons"].items()]
         print(f"{cell:>22s}: " + "; ".join(parts))
+    for cell, done in summary.get("cells_stopped", {}).items():
+        print(f"{cell:>22s}: stopped after round {done} (rerun the command to resume)")
     print("(* = sign resolved after Holm over all comparisons; intervals: 95 % t over "
           "seeds)")
     print(f"wrote {out / 'summary.json'} ({time.perf_counter() - t0:.0f} s)")
@@ -550,6 +816,10 @@ def main(argv=None) -> int:
         if getattr(args, name) < (2 if name == "seeds" else 1):
             parser.error(f"--{name} must be >= {2 if name == 'seeds' else 1}")
     if args.what == "cell":
+        try:
+            check_grid(Path(args.out), args.seeds, args.rounds, args.objects, write=False)
+        except GridMismatch as exc:
+            parser.error(str(exc))
         doc = run_cell(args.cell, Path(args.out), args.seeds, args.rounds, args.objects)
         print(f"{args.cell}: {doc['seconds']:.0f} s")
         return 0

@@ -10,6 +10,9 @@
 #   strong1 strong2 strong3   the 20-seed strong run, objects 1-2, 3-4, 5-6 of the hard set
 #   transfer-<cell>           one 20-round transfer cell (experiments.grasp_sensitivity;
 #                             5 seeds, the first TR_OBJECTS=3 objects of the hard set)
+#   sens-<cell>               one cell of the sensitivity grid under today's trial, e.g.
+#                             sens-10N_mu0.2-0.5_d435 (experiments.grasp_sensitivity cell;
+#                             SENS_SEEDS=10 seeds, 5 rounds, the 6 objects of the hard set)
 #   abl1 abl2 abl3 abl4       the ablations' distinct runs, in four parts
 #   paper alpha core_set loss schedule regret   a grasp_learning setting
 # e.g. strong1:0-3:560 transfer-A:12-13:560. The results' per-seed files name the command,
@@ -29,6 +32,17 @@ echo "hard set: ${HARD[*]}" | tee "$R/logs/jobs.txt"
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >> "$R/logs/jobs.txt" 2>&1
 lscpu | grep -E "Model name|^CPU\(s\)" >> "$R/logs/jobs.txt"
 
+# every 10 s: each run's checkpointed next round (how far a stopped run got, and when)
+(
+  while sleep 10; do
+    for c in "$R"/*/runs/*/checkpoint.npz "$RUNS"/*/checkpoint.npz; do
+      [ -f "$c" ] && echo "$(( $(date +%s) - T0 )) s $c next_round $(python3 -c \
+        "import numpy as np,sys; print(int(np.load(sys.argv[1])['next_round']))" "$c" 2>&1)"
+    done
+  done
+) >> "$R/logs/progress.txt" 2>&1 &
+WATCH=$!
+
 run() {  # NAME CORES LIMIT CMD...
   local name=$1 cores=$2 limit=$3
   shift 3
@@ -37,7 +51,9 @@ run() {  # NAME CORES LIMIT CMD...
     timeout -s KILL "$limit" taskset -c "$cores" "$@" > "$R/logs/$name.log" 2>&1
     echo "$name: exit $? after $(( $(date +%s) - s )) s on cores $cores: $*" >> "$R/logs/jobs.txt"
   ) &
+  PIDS+=($!)
 }
+PIDS=()
 
 for job in "$@"; do
   IFS=: read -r name cores limit <<< "$job"
@@ -54,6 +70,9 @@ for job in "$@"; do
     transfer-*) run "$name" "$cores" "$limit" python3 -m experiments.grasp_sensitivity \
                transfer-cell "${name#transfer-}" --out "$R/transfer" --seeds 5 --rounds 20 \
                --objects ${TR_OBJECTS:-3} ${SMOKE:-} ;;
+    sens-*) run "$name" "$cores" "$limit" python3 -m experiments.grasp_sensitivity \
+               cell "${name#sens-}" --out "$R/sensitivity" --seeds ${SENS_SEEDS:-10} \
+               --rounds 5 --objects 6 ${SMOKE:-} ;;
     abl1|abl2|abl3|abl4) labels=(x "alpha=0.01,alpha=0.05" "alpha=0.2,alpha=1.0"
                "core=none,core=random" "loss=l1,schedule")
              run "$name" "$cores" "$limit" python3 -m experiments.grasp_learning ablations \
@@ -65,10 +84,13 @@ for job in "$@"; do
     *) echo "unknown job $name" >> "$R/logs/jobs.txt" ;;
   esac
 done
-wait
+wait "${PIDS[@]}"
+kill "$WATCH" 2>/dev/null
 # stopped runs: their finished rounds, from the checkpoints
-python3 -m experiments.grasp_learning collect "$R/transfer/runs" "$R/transfer" \
-  >> "$R/logs/collect.log" 2>&1
+for s in transfer sensitivity; do
+  [ -d "$R/$s/runs" ] && python3 -m experiments.grasp_learning collect "$R/$s/runs" "$R/$s" \
+    >> "$R/logs/collect.log" 2>&1
+done
 for d in "$RUNS"/*; do
   dest="$R/$(basename "$d")"
   [ "$(basename "$d")" = ablations ] && dest="$R"

@@ -1,6 +1,8 @@
 """Forgetting against adaptation for each core set, from experiments/core_set_forgetting.py.
 
     python -m figures.make_forgetting_fig runs/forgetting   # -> runs/forgetting/forgetting.png
+    python -m figures.make_forgetting_fig experiments/results/forgetting \
+        docs/img/core_set_forgetting.png                     # the figure docs/RESULTS.md shows
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 
-def make_figure(run_dir: str | Path) -> Path:
+def make_figure(run_dir: str | Path, out: str | Path | None = None) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -31,18 +33,23 @@ def make_figure(run_dir: str | Path) -> Path:
         x = np.array([r["new"]["roc_auc"] for r in rows])
         y = np.array([r["d0"]["roc_auc"] for r in rows])
         ax.scatter(x, y, c=colours[kind], alpha=0.5, s=18)
-        ax.errorbar(x.mean(), y.mean(), xerr=x.std(), yerr=y.std(), fmt="o", c=colours[kind],
+        ax.errorbar(x.mean(), y.mean(), xerr=x.std(ddof=1), yerr=y.std(ddof=1), fmt="o",
+                    c=colours[kind],
                     ms=7, label=f"core set: {kind} (mean ± sd over {len(rows)} seeds)")
     ax.set_xlabel("ROC-AUC on the new object's held-out poses (adaptation)")
     ax.set_ylabel("ROC-AUC on D0-like objects (higher = less forgetting)")
-    ax.set_title("Fine-tuning θ0 on one hard object", fontsize=10)
+    cfg = run_dir / "config.json"
+    obj = io.load_json(cfg)["args"]["object"] if cfg.exists() else "one hard object"
+    ax.set_title(f"Fine-tuning θ0 on {obj} (one-trial labels)", fontsize=10)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = run_dir / "forgetting.png"
+    out = Path(out) if out else run_dir / "forgetting.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return out
 
 
 if __name__ == "__main__":
-    print(make_figure(sys.argv[1] if len(sys.argv) > 1 else "runs/forgetting"))
+    print(make_figure(sys.argv[1] if len(sys.argv) > 1 else "runs/forgetting",
+                      sys.argv[2] if len(sys.argv) > 2 else None))

@@ -242,3 +242,79 @@ def test_summary_comparison_still_catches_a_change():
         _assert_same_summary(base, {"a": -0.17880331, "b": [1, 2.5], "c": "x"})
     with pytest.raises(AssertionError):
         _assert_same_summary(base, {"a": -0.1788033169921101, "b": [1, 2.5], "d": "x"})
+
+
+# --- The core set against forgetting (experiments/results/forgetting), 20 N trial ---
+
+FORGET = RESULTS / "forgetting"
+DOC = (Path(__file__).resolve().parents[1] / "docs" / "RESULTS.md").read_text()
+
+
+def _section(doc, title):
+    start = doc.index(f"## {title}\n")
+    end = doc.find("\n## ", start + 1)
+    return doc[start:end if end > 0 else None]
+
+
+def test_forgetting_summary_is_what_the_per_seed_file_gives():
+    from experiments.core_set_forgetting import summarise
+
+    res = json.loads((FORGET / "results.json").read_text())
+    committed = json.loads((FORGET / "summary.json").read_text())
+    _assert_same_summary(committed, json.loads(json.dumps(summarise(res))))
+
+
+def test_forgetting_was_made_with_the_shipped_theta0_and_trial():
+    from sern_jax.grasp import artifacts, sim
+
+    cfg = json.loads((FORGET / "config.json").read_text())
+    assert cfg["theta0"] == artifacts.load_theta0().fingerprint
+    assert cfg["physics"] == json.loads(json.dumps(sim.physics_settings()))
+    assert cfg["physics"]["scene"]["finger_force"] == 20.0
+    assert cfg["machine"]["cpu_count"] == 2 and cfg["command"].startswith(
+        "python -m experiments.core_set_forgetting")
+
+
+def test_forgetting_numbers_quoted():
+    from experiments.core_set_forgetting import summarise
+
+    res = json.loads((FORGET / "results.json").read_text())
+    cfg = json.loads((FORGET / "config.json").read_text())
+    s = summarise(res)
+    sec = _section(DOC, "The core set against forgetting")
+    assert "not rerun" not in sec
+    assert (round(cfg["seconds"]), round(cfg["load_average_end"][0], 1)) == (211, 13.6)
+    assert "load average 13.6 at the end, 211 s" in sec
+    assert (cfg["args"]["object"], cfg["args"]["seeds"], cfg["online_grasps"],
+            cfg["d0_grasps"], cfg["test_grasps"]) == ("tless_part_a", 4, 256, 768, 256)
+    assert (_pct(cfg["online_success_rate"]), _pct(cfg["d0_success_rate"]),
+            cfg["d0_failures"]) == (77.3, 90.4, 74)
+    t = s["theta0"]
+    row = f"| θ0 | {t['d0_roc_auc']:.3f} | {t['d0_bce']:.3f} | {t['new_roc_auc']:.3f} |"
+    assert row == "| θ0 | 0.990 | 0.053 | 0.491 |" and row in sec
+    label = {"none": "no core set", "random": "random core set", "dpp": "DPP core set"}
+    for kind, name in label.items():
+        k = s["per_kind"][kind]
+        cells = " | ".join(f"{k[m]['mean']:.3f} ± {k[m]['half']:.3f}"
+                           for m in ("d0_roc_auc", "d0_bce", "new_roc_auc"))
+        assert f"| {name} | {cells} |" in sec, kind
+    diffs = {d["name"]: d for d in s["differences"]}
+
+    def cell(metric, pair, first):
+        d = diffs[f"{metric}: {pair}"]
+        p = d["pvalue_holm"]
+        ps = f"{p:.3f}" if p < 0.01 else f"{p:.2f}"
+        ps = ps.rstrip("0") if p >= 0.01 and ps.endswith("0") else ps
+        body = f"{d['mean']:+.3f} ± {d['half']:.3f}".replace("-", "−")
+        return f"{body} (Holm p {ps})" if first else f"{body} ({ps})"
+
+    for pair, name in (("dpp - none", "DPP − none"), ("random - none", "random − none"),
+                       ("dpp - random", "DPP − random")):
+        cells = [cell("d0_roc_auc", pair, pair == "dpp - none"), cell("d0_bce", pair, False),
+                 cell("new_roc_auc", pair, False)]
+        assert f"| {name} | {' | '.join(cells)} |" in sec, name
+    resolved = sorted(n for n, d in diffs.items() if d["resolved"])
+    assert resolved == ["d0_bce: dpp - none", "d0_roc_auc: dpp - none",
+                        "d0_roc_auc: random - none", "new_roc_auc: dpp - none"]
+    none = s["per_kind"]["none"]["d0_roc_auc"]["mean"]
+    assert round(t["d0_roc_auc"] - none, 3) == 0.034 and "falls\nby 0.034" in sec

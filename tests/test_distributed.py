@@ -319,6 +319,92 @@ def test_baselines_tune_settings_on_ray(local_ray, tmp_path, monkeypatch):
         grid.main(["run", "--out", str(tmp_path), "--ray"])  # --ray is for tune only
 
 
+# `sern grasp learn --ray`: one task per object. Shipped θ0, a tiny run (2 objects x 2
+# learners x 2 seeds x 2 rounds of 3 grasps); ~1 min on the shared 2 cores.
+# (--explore = --evaluate and no low-variance evaluation: fewer shapes, fewer compiles)
+LEARN = ["grasp", "learn", "box", "triangular_prism", "--policies", "sern,greedy", "--seeds",
+         "2", "--rounds", "2", "--explore", "2", "--evaluate", "2", "--eval-poses", "0",
+         "--fit-steps", "4", "--no-figures", "--no-progress"]
+
+
+def _learn_arrays(run_dir: Path) -> dict:
+    arrays = {f"results/{k}": v for k, v in _arrays(run_dir / "results.npz").items()}
+    arrays.update({f"checkpoint/{k}": v for k, v in
+                   _arrays(run_dir / "checkpoint.npz").items()})
+    return arrays
+
+
+def _unit_fails_for_box(config, spec, out_dir, theta0) -> None:
+    """A learn unit that raises for the box and runs the real unit otherwise."""
+    if spec.name == "box":
+        raise RuntimeError("injected failure on the box")
+    from sern_jax.grasp import learn_units
+
+    learn_units.run_unit(config, spec, out_dir, theta0)
+
+
+def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
+        local_ray, tmp_path, capsys, monkeypatch):
+    from sern_jax.grasp import learn_units
+
+    one, par = tmp_path / "one", tmp_path / "ray"
+    assert main(LEARN + ["--out", str(one)]) == 0
+    assert main(LEARN + ["--ray", "--out", str(par)]) == 0
+    assert "Ray: 2 objects" in capsys.readouterr().out
+    single = _learn_arrays(one)
+    _assert_same_arrays(single, _learn_arrays(par))
+    assert (io.load_json(one / "table.json")["table"] ==
+            io.load_json(par / "table.json")["table"])
+    assert sorted(p.name for p in (par / "units").iterdir()) == [
+        "object_box", "object_triangular_prism"]
+    assert any((par / ".jax_cache").iterdir())
+
+    # a run stopped before its units were joined (box's unit lost), and a unit that keeps
+    # failing: one line naming it, exit 1; the finished unit is kept
+    kept = (par / "units" / "object_triangular_prism" / "checkpoint.npz").stat().st_mtime_ns
+    for name in ("units/object_box/checkpoint.npz", "checkpoint.npz", "results.npz"):
+        (par / name).unlink()
+    monkeypatch.setattr(learn_units, "run_unit", _unit_fails_for_box)
+    assert main(LEARN + ["--ray", "--out", str(par)]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and err[0].startswith("sern: error: --ray: unit object_box "), err
+    assert "RuntimeError: injected failure on the box" in err[0]
+    assert not (par / "units" / "object_box" / "checkpoint.npz").exists()
+    assert not (par / "checkpoint.npz").exists()  # nothing joined while a unit is missing
+    assert (par / "units" / "object_triangular_prism" /
+            "checkpoint.npz").stat().st_mtime_ns == kept
+    monkeypatch.undo()
+
+    # resume with the same command: only the box runs, the results are the same
+    assert main(LEARN + ["--ray", "--out", str(par)]) == 0
+    assert "Ray: 1 objects" in capsys.readouterr().out
+    assert (par / "units" / "object_triangular_prism" /
+            "checkpoint.npz").stat().st_mtime_ns == kept
+    _assert_same_arrays(single, _learn_arrays(par))
+
+    # a run left part-way without --ray (its checkpoint after round 1) continues on Ray:
+    # split into units at round 2, each replays round 1 and runs round 2
+    from sern_jax.grasp import runner
+
+    saved = _arrays(one / "checkpoint.npz")
+    results = runner.RoundResults(*(saved[f] for f in runner.RoundResults._fields))
+    results, rewards = learn_units._unfinished_rounds(results, saved["explore_reward"], 2)
+    part = tmp_path / "part"
+    part.mkdir()
+    runner._save(part / "checkpoint.npz", str(saved["fingerprint"]), results, rewards, 2)
+    assert main(LEARN + ["--ray", "--out", str(part)]) == 0
+    assert "Ray: 2 objects" in capsys.readouterr().out
+    _assert_same_arrays(single, _learn_arrays(part))
+
+
+def test_learn_ray_flags_are_one_line(tmp_path, capsys):
+    out = tmp_path / "r"
+    assert main(LEARN + ["--ray-cpus", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--ray-cpus" in err and "add --ray" in err, err
+    assert not out.exists()
+
+
 # fault injection: these unit functions travel by value (tests/ is not importable by workers)
 try:
     from ray import cloudpickle  # Ray ships its own

@@ -357,6 +357,9 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
     p.add_argument("--no-figures", action="store_true")
     p.add_argument("--no-progress", action="store_true")
+    from sern_jax import distributed  # --ray [ADDRESS]: one Ray task per object (issue 20)
+
+    distributed.add_arguments(p)
     p.set_defaults(func=lambda args: run_learn(args, make_figures=make_figures))
     return p
 
@@ -532,7 +535,9 @@ def check_learn_args(args, num_objects: int | None = None):
 
 def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     config = check_learn_args(args)
-    from sern_jax import io
+    from sern_jax import distributed, io
+
+    ray = distributed.from_args(args)  # None without --ray
     from sern_jax.grasp import artifacts, runner
 
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
@@ -551,8 +556,14 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     out = Path(args.out) if args.out else Path("runs") / ("learn-" + fingerprint)
     _checkpoint_precheck(out, fingerprint)
     with validate.locked_run_dir(out):
-        res = runner.run(config, specs, out, theta0=theta0, progress=not args.no_progress,
-                         log=log)
+        if ray is None:
+            res = runner.run(config, specs, out, theta0=theta0,
+                             progress=not args.no_progress, log=log)
+        else:  # one Ray task per object, joined into the same run directory
+            from sern_jax.grasp import learn_units
+
+            res = learn_units.run(config, specs, out, theta0=theta0, ray=ray,
+                                  progress=not args.no_progress, log=log)
         seconds = time.perf_counter() - t0
         write_learn_outputs(out, res, seconds, theta0)
         table = format_table(res["table"])

@@ -318,3 +318,83 @@ def test_forgetting_numbers_quoted():
                         "d0_roc_auc: random - none", "new_roc_auc: dpp - none"]
     none = s["per_kind"]["none"]["d0_roc_auc"]["mean"]
     assert round(t["d0_roc_auc"] - none, 3) == 0.034 and "falls\nby 0.034" in sec
+
+
+# --- Native-MJX agreement and trial rates under the 20 N trial (docs/GRASP.md) ---
+
+AGREE = RESULTS / "agreement"
+RATE = RESULTS / "trial_rate"
+GRASP_DOC = (Path(__file__).resolve().parents[1] / "docs" / "GRASP.md").read_text()
+AGREE_ORDER = ("small_box", "l_shape", "triangular_prism", "pipe_tee", "tless_part_a",
+               "handle_jug", "detergent_bottle", "pipe_tee_steel")
+
+
+def _agreement_rows():
+    rows = {}
+    for f in sorted(AGREE.glob("agreement_*.json")):
+        d = json.loads(f.read_text())
+        ((name, s),) = d["agreement"]["objects"].items()
+        assert f.name == f"agreement_{name}.json" and d["object"] == "small_box"
+        assert d["machine"]["jax_devices"] == ["cuda:0"]
+        rows[name] = s
+    return rows
+
+
+def test_agreement_20N_quoted():
+    from scipy import stats as sps
+
+    from sern_jax import stats
+
+    rows = _agreement_rows()
+    assert tuple(rows) == tuple(sorted(AGREE_ORDER))
+    agree = total = native_only = mjx_only = 0
+    for name in AGREE_ORDER:
+        s = rows[name]
+        n = s["num_trials"]
+        a = round(s["agreement"] * n)
+        assert a == pytest.approx(s["agreement"] * n, abs=1e-9)
+        sn, sm = round(s["success_native"] * n), round(s["success_mjx"] * n)
+        d = n - a  # discordant pairs: native-only successes minus MJX-only = sn - sm
+        assert (d + sn - sm) % 2 == 0
+        native_only += (d + sn - sm) // 2
+        mjx_only += (d - sn + sm) // 2
+        agree, total = agree + a, total + n
+        assert s["nan_native"] == 0 and s["nan_mjx"] == 0
+        row = (f"| {name} | {n} | {s['agreement']:.3f} | {s['success_native']:.3f} | "
+               f"{s['success_mjx']:.3f} |")
+        assert row in GRASP_DOC, row
+    lo, hi = stats.clopper_pearson(agree, total, level=0.95)
+    p_native = np.mean([rows[n]["success_native"] for n in AGREE_ORDER])
+    p_mjx = np.mean([rows[n]["success_mjx"] for n in AGREE_ORDER])
+    assert (f"| **all** | {total} | **{agree / total:.3f}** ({agree}/{total}; 95 % "
+            f"Clopper–Pearson {lo:.3f}–{hi:.3f}) | {p_native:.3f} | {p_mjx:.3f} |") in GRASP_DOC
+    assert (agree, total) == (364, 384) and lo > 0.9
+    six = AGREE_ORDER[:6]
+    a6 = sum(round(rows[n]["agreement"] * rows[n]["num_trials"]) for n in six)
+    assert f"agreement is {a6}/288 = {a6 / 288:.3f}" in GRASP_DOC
+    p = sps.binomtest(mjx_only, native_only + mjx_only, 0.5).pvalue
+    assert (native_only, mjx_only, round(p, 3)) == (16, 4, 0.012)
+    assert "in 16 of the 20 the native trial succeeds" in GRASP_DOC
+    assert round(100 * (p_native - p_mjx), 1) == 3.1
+
+
+def test_trial_rates_20N_quoted():
+    nat = json.loads((RATE / "rate_native_2core.json").read_text())
+    gpu = json.loads((RATE / "rate_mjx_gpu.json").read_text())
+    assert nat["machine"]["cores_usable"] == 2 and nat["backends"]["native"]["threads"] == 2
+    assert gpu["machine"]["cores_usable"] == 14 and gpu["machine"]["jax_devices"] == ["cuda:0"]
+    rows = nat["backends"]["native"]["batches"]
+    assert [r["batch"] for r in rows] == [64, 256, 1024]
+    assert all(r["nan"] == 0 and r["success_rate"] == 1.0 for r in rows)
+    rates = " / ".join(f"{r['trials_per_s']:.0f}" for r in rows)
+    per_cpu = [r["trials_per_cpu_s"] for r in rows]
+    assert rates == "333 / 303 / 317" and f"**{rates}**" in GRASP_DOC
+    assert f"{min(per_cpu):.0f}–{max(per_cpu):.0f} trials per CPU-second" in GRASP_DOC
+    (m,) = gpu["backends"]["mjx"]["batches"]
+    assert (m["batch"], round(m["trials_per_s"]), m["nan"]) == (32768, 6475, 0)
+    assert f"{m['physics_steps_per_s'] / 1e6:.2f} M physics steps/s" in GRASP_DOC
+    assert f"compile {gpu['backends']['mjx']['compile_s']:.0f} s" in GRASP_DOC
+    assert round(100 * (1 - m["trials_per_s"] / 9438)) == 31
+    jobs = (RATE / "jobs.txt").read_text()
+    assert "NVIDIA H100" in jobs and "exit 0" in jobs and "taskset -c 0,1" in jobs
+    assert jobs.count("exit 0") == 10

@@ -221,11 +221,13 @@ def tuned_values(out: Path, untuned: bool) -> dict:
 def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
         num_objects: int | None, progress: bool, explore: int = 20,
         run_dir: Path | None = None, regret_grasps: int = 0,
-        names: tuple[str, ...] | None = None) -> None:
+        names: tuple[str, ...] | None = None, ray=None) -> None:
     """The reported comparison. ``meta.json`` is written first and ``per_seed.npz`` from the
     runner's checkpoint, so a run stopped after some rounds still leaves its finished rounds
     (``collect``); ``run_dir`` (default ``out/run``) is the runner's run directory (a
-    checkpoint of kilobytes): the same command resumes it."""
+    checkpoint of kilobytes): the same command resumes it. ``ray``
+    (``sern_jax.distributed.RayConfig``): one Ray task per object
+    (``sern_jax.grasp.learn_units``: ``run_dir/units/``, joined into the same checkpoint)."""
     from sern_jax import io
 
     specs, theta0 = hard_specs()
@@ -261,7 +263,15 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
             "finished": False}
     meta["calls"] = calls + [call]
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
-    res, secs = _run(config, specs, run_dir, theta0, progress)
+    if ray is None:
+        res, secs = _run(config, specs, run_dir, theta0, progress)
+    else:  # issue 20: the same checkpoint, each object's copies a Ray task
+        from sern_jax.grasp import learn_units
+
+        t = time.perf_counter()
+        res = learn_units.run(config, specs, run_dir, theta0=theta0, ray=ray,
+                              progress=progress)
+        secs = time.perf_counter() - t
     call.update(finished=True, wall_s=secs, timings=res["timings"],
                 trial_counts=res["trial_counts"])
     meta.update(wall_s=sum(c.get("wall_s", 0.0) for c in meta["calls"]),
@@ -527,14 +537,15 @@ def main(argv=None) -> None:
     p.add_argument("--no-progress", action="store_true")
     from sern_jax import distributed
 
-    distributed.add_arguments(p)  # tune --ray: the three settings as Ray tasks (issue 20)
+    distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
     a = p.parse_args(argv)
     try:
         ray = distributed.from_args(a)
     except ValueError as e:
         p.error(str(e))
-    if ray is not None and a.what != "tune":
-        p.error("--ray applies to tune (its three settings are the units)")
+    if ray is not None and a.what not in ("tune", "run"):
+        p.error("--ray applies to tune (its three settings are the units) and run (its "
+                "objects are)")
     for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
                     ("--rounds", a.rounds), ("--tune-rounds", a.tune_rounds),
                     ("--repeats", a.repeats), ("--explore", a.explore)):
@@ -572,8 +583,11 @@ def main(argv=None) -> None:
             raise SystemExit(str(e)) from None
         print(json.dumps(doc, indent=1))
     elif a.what == "run":
-        run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
-            not a.no_progress, a.explore, a.run_dir, a.regret_grasps, names)
+        try:
+            run(a.out, a.seeds, a.rounds, a.regret_trials, a.backend, a.untuned, a.objects,
+                not a.no_progress, a.explore, a.run_dir, a.regret_grasps, names, ray=ray)
+        except distributed.UnitFailedError as e:  # one line naming the object
+            raise SystemExit(str(e)) from None
     elif a.what == "collect":
         collect(a.out)
     else:

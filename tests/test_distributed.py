@@ -316,7 +316,29 @@ def test_baselines_tune_settings_on_ray(local_ray, tmp_path, monkeypatch):
     tuned = json.loads((tmp_path / "tuned.json").read_text())
     assert all(w > 0 for w in tuned["wall_s"])  # the tasks' seconds, not the read-back's
     with pytest.raises(SystemExit):
-        grid.main(["run", "--out", str(tmp_path), "--ray"])  # --ray is for tune only
+        grid.main(["collect", "--out", str(tmp_path), "--ray"])  # tune and run only
+
+
+def test_baselines_run_on_ray_goes_through_the_learn_units(local_ray, tmp_path, monkeypatch):
+    """`python -m experiments.grasp_baselines run --ray`: the reported run's objects as
+    learn_units (whose results equal the single-process run: the learn test above); a
+    unit failing stops it in one line (a stand-in for learn_units.run here)."""
+    import experiments.grasp_baselines as grid
+    from sern_jax.grasp import learn_units
+
+    seen = {}
+
+    def fake(config, specs, run_dir, *, theta0, ray, progress):
+        seen.update(objects=[s.name for s in specs], run_dir=run_dir, ray=ray)
+        raise distributed.UnitFailedError("object_box", "RuntimeError: stand-in")
+
+    monkeypatch.setattr(learn_units, "run", fake)
+    monkeypatch.setattr(grid, "_run", lambda *a: pytest.fail("ran without Ray"))
+    with pytest.raises(SystemExit, match=r"^--ray: unit object_box failed: RuntimeError"):
+        grid.main(["run", "--out", str(tmp_path), "--untuned", "--objects", "2", "--ray",
+                   "--ray-retries", "1", "--no-progress"])
+    assert len(seen["objects"]) == 2 and seen["run_dir"] == tmp_path / "run"
+    assert seen["ray"].max_retries == 1
 
 
 # `sern grasp learn --ray`: one task per object. Shipped θ0, a tiny run (2 objects x 2

@@ -28,6 +28,13 @@ State: ``params`` / ``opt_state`` hold member 0 (so whatever reads ``state.param
 network sees a genuine member), ``extra.params`` / ``extra.opt_state`` members 1..M-1
 stacked on a leading axis [M - 1, ...], ``extra.weights`` the bootstrap weights
 [M, T + |C|].
+
+Cost. ``act`` computes the action from the drawn member's forward alone and π from all M,
+so a caller that does not output π (the grasp runner without regret accounting) runs one
+forward per decision; ``update`` fits the M members as one vmapped computation; greedy
+evaluation needs all M. ``--ensemble-heads shared`` (not the default, other results) is
+Bootstrapped DQN's one network with M heads, about one network's cost
+(:func:`_shared_heads`).
 """
 
 from __future__ import annotations
@@ -44,10 +51,11 @@ from sern_jax import policies as pol
 from sern_jax.learners import base
 from sern_jax.types import Array, Key
 
-__all__ = ["BOOTSTRAPS", "EnsembleConfig", "EnsembleExtra", "bootstrap_weights",
-           "ensemble_ts"]
+__all__ = ["BOOTSTRAPS", "HEADS", "EnsembleConfig", "EnsembleExtra", "Heads",
+           "SharedHeadsExtra", "bootstrap_weights", "ensemble_ts"]
 
 BOOTSTRAPS = ("bernoulli", "poisson")
+HEADS = ("networks", "shared")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +71,11 @@ class EnsembleConfig:
     bootstrap_p: float = dataclasses.field(default=0.95, metadata={
         "flag": "--bootstrap-p", "help": "ensemble_ts: probability a row is in a member's "
         "data, bernoulli only (Riquelme et al. 2018: 0.95)"})
+    ensemble_heads: str = dataclasses.field(default="networks", metadata={
+        "flag": "--ensemble-heads", "help": "ensemble_ts: networks (M whole network "
+        "copies, the default; M forwards and fits) or shared (one network, M linear heads "
+        "on its last hidden features, Bootstrapped DQN's shared torso: about one "
+        "network's cost; other results)"})
 
     def __post_init__(self):
         m = self.ensemble_size
@@ -71,10 +84,25 @@ class EnsembleConfig:
         if self.bootstrap not in BOOTSTRAPS:
             raise ValueError(f"--bootstrap must be one of {', '.join(BOOTSTRAPS)}, "
                              f"got {self.bootstrap!r}")
+        if self.ensemble_heads not in HEADS:
+            raise ValueError(f"--ensemble-heads must be one of {', '.join(HEADS)}, "
+                             f"got {self.ensemble_heads!r}")
         p = base.check_probability("--bootstrap-p", self.bootstrap_p)
         if p == 0.0:
             raise ValueError(f"--bootstrap-p must be > 0 (a member with no data never "
                              f"learns), got {self.bootstrap_p!r}")
+
+
+class Heads(NamedTuple):
+    """``shared``'s member heads on the network's last hidden features [d]."""
+
+    w: Array  # [M, d] float32, zero at init (every member starts at θ0)
+    b: Array  # [M] float32
+
+
+class SharedHeadsExtra(NamedTuple):
+    heads: Heads  # the M members' heads (trained with θ by one Adam; see opt_state)
+    weights: Array  # [M, T + |C|] float32 bootstrap weights of every row of D ∪ C
 
 
 class EnsembleExtra(NamedTuple):
@@ -95,7 +123,10 @@ def bootstrap_weights(key: Key, num_members: int, num_rows: int, kind: str,
 
 def ensemble_ts(model: base.Model, train: base.TrainConfig,
                 config: EnsembleConfig = EnsembleConfig()) -> base.Learner:
-    """Thompson sampling over a bootstrapped ensemble of ``config.ensemble_size`` members."""
+    """Thompson sampling over a bootstrapped ensemble of ``config.ensemble_size`` members
+    (``config.ensemble_heads``: M whole networks, or one network with M heads)."""
+    if config.ensemble_heads == "shared":
+        return _shared_heads(model, train, config)
     num_m = int(config.ensemble_size)
     one_init = base.make_neural_init(model, train, lambda key: ())
     fit = base.make_fit(model, optax.adam(train.learning_rate), train.loss,
@@ -140,7 +171,101 @@ def ensemble_ts(model: base.Model, train: base.TrainConfig,
         return jax.vmap(lambda p: model.apply(p, *obs.inputs))(params)  # [M, K]
 
     def act(key: Key, state: base.LearnerState, obs: base.Obs):
+        # The action needs only the drawn member's forward; π (the mixture) needs all M.
+        # Computed apart, so a caller that drops ``probs`` (the runner without regret
+        # accounting) lets XLA remove the other members' forwards: 1 forward per decision
+        # instead of M, the same action (tests/learners: equal to the all-member argmax).
+        m = jax.random.randint(key, (), 0, num_m)
+        params, _ = members(state)
+        drawn = model.apply(jax.tree.map(lambda x: x[m], params), *obs.inputs)  # [K]
+        action = pol.sample_icdf(obs.u, pol.greedy_probs(drawn, mask=obs.valid),
+                                 mask=obs.valid)
         r_hat = member_r_hat(state, obs)
+        greedy = jax.vmap(lambda r: pol.greedy_probs(r, mask=obs.valid))(r_hat)  # [M, K]
+        return action, jnp.mean(greedy, axis=0), state
+
+    def predict(state: base.LearnerState, obs: base.Obs) -> Array:
+        return jnp.mean(member_r_hat(state, obs), axis=0)
+
+    return base.Learner(init, act, update, predict)
+
+
+def _shared_heads(model: base.Model, train: base.TrainConfig,
+                  config: EnsembleConfig) -> base.Learner:
+    """``--ensemble-heads shared``: Bootstrapped DQN's layout (Osband et al. 2016), one
+    network θ and M linear heads on its last hidden features φ(x):
+    logit_m(x) = logit_θ(x) + φ_θ(x)·w_m + b_m, heads zero at init (every member starts
+    at θ0, as in ``networks``). Each of ``train.fit_steps`` Adam steps draws ONE minibatch
+    from D ∪ C (rows ∝ weight, as every learner's fit) and member m's loss is that
+    minibatch's loss weighted by its bootstrap weights of the rows (Bootstrapped DQN's
+    masks; Poisson counts as weights); θ and the heads take the gradient of the members'
+    mean loss, with one Adam. A decision costs one forward (the M heads are a [d, M]
+    product), an update one network's fit: about SERN's cost, where ``networks`` costs M
+    forwards per evaluation and M fits. The members share θ, so they are more alike than
+    M independent networks: another learner, with other results.
+
+    State: ``params`` is θ (the shared network, not a member), ``opt_state`` Adam's over
+    ``(model.trainable(θ), heads)``, ``extra`` :class:`SharedHeadsExtra`."""
+    num_m = int(config.ensemble_size)
+    optimizer = optax.adam(train.learning_rate)
+    loss_fn = base.LOSSES[train.loss]
+    num_steps, batch_size = train.fit_steps, train.batch_size
+
+    def member_logits(params, heads: Heads, inputs) -> Array:
+        """[M, ...]: every member's logit on inputs with leading shape [...]."""
+        logit = model.logits(params, *inputs)  # [...]
+        phi = model.features(params, *inputs)  # [..., d]
+        b = jnp.reshape(heads.b, (num_m,) + (1,) * logit.ndim)
+        return logit[None] + jnp.moveaxis(phi @ heads.w.T, -1, 0) + b
+
+    def init(key: Key, theta0, core_set: base.Data) -> base.LearnerState:
+        buffer = base.empty_buffer(core_set, train.horizon)
+        d = jax.eval_shape(model.features, theta0,
+                           *(x[:1] for x in core_set.inputs)).shape[-1]
+        heads = Heads(jnp.zeros((num_m, d), jnp.float32), jnp.zeros((num_m,), jnp.float32))
+        weights = bootstrap_weights(key, num_m, buffer.weight.shape[0], config.bootstrap,
+                                    config.bootstrap_p)
+        return base.LearnerState(theta0, optimizer.init((model.trainable(theta0), heads)),
+                                 buffer, SharedHeadsExtra(heads, weights))
+
+    def update(key: Key, state: base.LearnerState, batch: base.Batch) -> base.LearnerState:
+        buffer = base.append(state.buffer, batch)  # D ∪ C, weights 1 (0: empty, NO_ARM)
+        n = buffer.weight.shape[0]
+        cdf = jnp.cumsum(jnp.maximum(buffer.weight, 0.0))
+        total = cdf[-1]
+        has_data = total > 0
+        u = jax.random.uniform(key, (num_steps, batch_size)) * total
+        idx = jnp.clip(jnp.searchsorted(cdf, u, side="right"), 0, n - 1)
+        masks = state.extra.weights  # [M, N]
+
+        def step(carry, idx_t):
+            params, heads, opt_state = carry
+            inputs = tuple(x[idx_t] for x in buffer.inputs)
+            label = jnp.broadcast_to(buffer.reward[idx_t], (num_m, batch_size))
+
+            def objective(trained):
+                net, hd = trained
+                lg = member_logits(model.merge(params, net), hd, inputs)  # [M, B]
+                return jnp.mean(jax.vmap(loss_fn)(lg, label, masks[:, idx_t]))
+
+            trained = (model.trainable(params), heads)
+            value, grads = jax.value_and_grad(objective)(trained)
+            updates, new_opt = optimizer.update(grads, opt_state, trained)
+            net, new_heads = optax.apply_updates(trained, updates)
+            new = (model.merge(params, net), new_heads, new_opt)
+            keep = jax.tree.map(lambda a, b: jnp.where(has_data, a, b), new, carry)
+            return keep, value
+
+        (params, heads, opt_state), _ = jax.lax.scan(
+            step, (state.params, state.extra.heads, state.opt_state), idx)
+        return state._replace(params=params, opt_state=opt_state, buffer=buffer,
+                              extra=state.extra._replace(heads=heads))
+
+    def member_r_hat(state: base.LearnerState, obs: base.Obs) -> Array:
+        return jax.nn.sigmoid(member_logits(state.params, state.extra.heads, obs.inputs))
+
+    def act(key: Key, state: base.LearnerState, obs: base.Obs):
+        r_hat = member_r_hat(state, obs)  # [M, K]: one forward, M heads
         greedy = jax.vmap(lambda r: pol.greedy_probs(r, mask=obs.valid))(r_hat)  # [M, K]
         m = jax.random.randint(key, (), 0, num_m)
         action = pol.sample_icdf(obs.u, greedy[m], mask=obs.valid)

@@ -41,7 +41,7 @@ LEARNERS: dict[str, LearnerSpec] = {
     "ensemble_ts": LearnerSpec(
         ensemble.ensemble_ts, ensemble.EnsembleConfig,
         "bootstrapped-ensemble Thompson sampling (--ensemble-size, --bootstrap, "
-        "--bootstrap-p)"),
+        "--bootstrap-p, --ensemble-heads)"),
     "neural_ucb": LearnerSpec(neural_ucb.neural_ucb, neural_ucb.NeuralUCBConfig,
                               "NeuralUCB, diagonal Z, Zhou et al. 2020 (--ucb-lambda, --nu)"),
     "normalized": LearnerSpec(normalized.normalized, normalized.NormalizedConfig,

@@ -342,6 +342,39 @@ def test_ensemble_ts_plays_each_members_argmax_with_frequency_one_over_m():
     np.testing.assert_allclose(np.asarray(probs[0])[:num_m], 1.0 / num_m, rtol=1e-6)
 
 
+def test_ensemble_act_plays_the_drawn_members_argmax_with_or_without_probs():
+    """act computes the action from the drawn member's forward alone (so a caller that
+    drops probs skips the other M - 1 forwards); it must equal the action the learner took
+    before, the argmax of member m among all M members' forwards, on every decision, and
+    be the same whether or not the jitted caller outputs probs (the runner's two paths)."""
+    num_m, n = 4, 64
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN, ensemble.EnsembleConfig(ensemble_size=num_m))
+    state = lrn.init(jax.random.key(0), THETA0, CORE)
+    for i in range(2):  # members part
+        state = jax.jit(lrn.update)(jax.random.key(10 + i), state, _batch(jax.random.key(i)))
+
+    def before(key, st, obs):  # the formula of the committed comparison's run
+        params = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), st.params,
+                              st.extra.params)
+        r_hat = jax.vmap(lambda p: MODEL.apply(p, *obs.inputs))(params)
+        greedy = jax.vmap(lambda r: pol.greedy_probs(r, mask=obs.valid))(r_hat)
+        m = jax.random.randint(key, (), 0, num_m)
+        return pol.sample_icdf(obs.u, greedy[m], mask=obs.valid), jnp.mean(greedy, 0)
+
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(3), i))(jnp.arange(n))
+    obs = jax.vmap(lambda k: _obs(k, num_valid=12))(keys)
+    full = jax.jit(jax.vmap(lrn.act, (0, None, 0)))(keys, state, obs)
+    only = jax.jit(lambda *a: jax.vmap(lrn.act, (0, None, 0))(*a)[0])(keys, state, obs)
+    ref = jax.jit(jax.vmap(before, (0, None, 0)))(keys, state, obs)
+    np.testing.assert_array_equal(full[0], ref[0])
+    np.testing.assert_array_equal(only, ref[0])
+    np.testing.assert_array_equal(full[1], ref[1])
+    assert len(np.unique(np.asarray(ref[0]))) > 1  # not a degenerate all-equal case
+    # Control: drawing the member from another key changes some actions.
+    other = jax.jit(jax.vmap(before, (0, None, 0)))(keys[::-1], state, obs)[0]
+    assert (np.asarray(other) != np.asarray(ref[0])).any()
+
+
 @pytest.mark.parametrize("kind", ["bernoulli", "poisson"])
 def test_ensemble_bootstrap_weights_and_members_part(kind):
     config = ensemble.EnsembleConfig(ensemble_size=4, bootstrap=kind, bootstrap_p=0.5)
@@ -433,6 +466,7 @@ def test_decaying_schedules_and_normalized_probs():
     (ensemble.EnsembleConfig, {"bootstrap": "jackknife"}, "--bootstrap"),
     (ensemble.EnsembleConfig, {"bootstrap_p": 0.0}, "--bootstrap-p"),
     (ensemble.EnsembleConfig, {"bootstrap_p": 1.5}, "--bootstrap-p"),
+    (ensemble.EnsembleConfig, {"ensemble_heads": "torso"}, "--ensemble-heads"),
     (neural_ucb.NeuralUCBConfig, {"ucb_lambda": 0.0}, "--ucb-lambda"),
     (neural_ucb.NeuralUCBConfig, {"nu": float("nan")}, "--nu"),
     (decaying.EGreedyDecayConfig, {"decay_epsilon0": -1.0}, "--decay-epsilon0"),
@@ -454,3 +488,84 @@ def test_configs_are_frozen_and_flags_documented():
             assert f.metadata["help"]
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(cfg, dataclasses.fields(cfg)[0].name, 1)
+
+
+# ----------------------------------------------------------------------------- shared heads
+
+
+SHARED = ensemble.EnsembleConfig(ensemble_size=3, ensemble_heads="shared")
+
+
+def test_ensemble_shared_heads_contract():
+    """--ensemble-heads shared: starts at θ0 (heads 0: predict = the network's r̂), never
+    picks a masked slot, π sums to 1 and is the mixture of the heads' argmaxes, the heads
+    part after an update, deterministic for a key, and vmapped equals one by one."""
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN, SHARED)
+    state = lrn.init(jax.random.key(1), THETA0, CORE)
+    obs = _obs(jax.random.key(2))
+    np.testing.assert_allclose(lrn.predict(state, obs), MODEL.apply(THETA0, *obs.inputs),
+                               rtol=1e-6)
+    assert np.asarray(state.extra.heads.w).shape == (3, H)
+    update, act = jax.jit(lrn.update), jax.jit(lrn.act)
+    new = update(jax.random.key(3), state, _batch(jax.random.key(4)))
+    again = update(jax.random.key(3), state, _batch(jax.random.key(4)))
+    jax.tree.map(np.testing.assert_array_equal, new, again)
+    w = np.asarray(new.extra.heads.w)
+    assert not np.allclose(w[0], w[1]) and not np.allclose(w[1], w[2])  # members part
+    assert not np.array_equal(np.asarray(new.params["w1"]), np.asarray(THETA0["w1"]))
+    for i in range(24):
+        obs = _obs(jax.random.key(100 + i), num_valid=1 + i % K, t=i)
+        action, probs, _ = act(jax.random.key(i), new, obs)
+        valid, p = np.asarray(obs.valid), np.asarray(probs)
+        assert valid[int(action)] and (p[~valid] == 0).all() and p[int(action)] > 0
+        np.testing.assert_allclose(p[valid].sum(), 1.0, rtol=1e-6)
+    obs = _obs(jax.random.key(7))._replace(valid=jnp.zeros(K, bool))
+    assert int(act(jax.random.key(0), new, obs)[0]) == pol.NO_ARM
+    n = 4
+    keys = jax.random.split(jax.random.key(9), n)
+    states = jax.vmap(lrn.init, (0, None, None))(keys, THETA0, CORE)
+    batch = jax.vmap(_batch)(jax.random.split(jax.random.key(6), n))
+    states = jax.jit(jax.vmap(lrn.update))(keys, states, batch)
+    obs = jax.vmap(lambda k: _obs(k, t=3))(jax.random.split(jax.random.key(5), n))
+    a, p, _ = jax.jit(jax.vmap(lrn.act))(keys, states, obs)
+    for i in range(n):
+        one = jax.tree.map(lambda x, i=i: x[i], (states, obs))
+        ai, pi, _ = act(keys[i], *one)
+        assert int(ai) == int(a[i])
+        np.testing.assert_allclose(pi, p[i], rtol=1e-6, atol=1e-7)
+        st = update(keys[i], lrn.init(keys[i], THETA0, CORE),
+                    jax.tree.map(lambda x, i=i: x[i], batch))
+        jax.tree.map(lambda x, y, i=i: np.testing.assert_allclose(x, y[i], rtol=1e-4,
+                                                                  atol=1e-5), st, states)
+
+
+def test_ensemble_shared_heads_plays_each_heads_argmax_with_frequency_one_over_m():
+    num_m, n = 3, 3000
+    model, _ = _linear_members(num_m)
+    lrn = ensemble.ensemble_ts(model, TRAIN, dataclasses.replace(SHARED, ensemble_size=num_m))
+    state = lrn.init(jax.random.key(0), model.init(None), CORE._replace(
+        inputs=(jnp.zeros((6, D)),)))
+    # head m scores candidate m highest (features = the one-hot input)
+    state = state._replace(extra=state.extra._replace(heads=ensemble.Heads(
+        3.0 * jnp.eye(num_m, D), jnp.zeros(num_m))))
+    obs = base.Obs((jnp.eye(K, D),), jnp.ones(K, bool), jnp.float32(0.3), jnp.int32(0))
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(42), i))(jnp.arange(n))
+    actions, probs, _ = jax.jit(jax.vmap(lrn.act, (0, None, None)))(keys, state, obs)
+    counts = np.bincount(np.asarray(actions), minlength=num_m)
+    assert counts.sum() == n and len(counts) == num_m, counts
+    assert stats.chisquare(counts, np.full(num_m, n / num_m)).pvalue > 1e-3, counts
+    assert stats.chisquare(counts, n * np.array([0.4, 0.3, 0.3])).pvalue < 1e-6, counts
+    np.testing.assert_allclose(np.asarray(probs[0])[:num_m], 1.0 / num_m, rtol=1e-6)
+
+
+def test_ensemble_shared_heads_told_only_failures_ranks_them_lower():
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN, SHARED)
+    state = lrn.init(jax.random.key(1), THETA0, CORE)
+    batch = _batch(jax.random.key(2), fail=True)
+    obs = base.Obs((batch.inputs[0],), jnp.ones(E, bool), jnp.float32(0.5), jnp.int32(0))
+    before = np.asarray(lrn.predict(state, obs))
+    for i in range(3):
+        state = jax.jit(lrn.update)(jax.random.key(10 + i), state, batch)
+    after = np.asarray(lrn.predict(state, obs))
+    played = np.asarray(batch.action) >= 0
+    assert (after[played] < before[played]).all(), (before, after)

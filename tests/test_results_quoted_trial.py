@@ -430,6 +430,14 @@ def test_agreement_20N_quoted():
     assert (native_only, mjx_only, round(p, 3)) == (16, 4, 0.012)
     assert "in 16 of the 20 the native trial succeeds" in GRASP_DOC
     assert round(100 * (p_native - p_mjx), 1) == 3.1
+    # the same figures where README.md's Performance section and docs/LEARNING.md quote them
+    root = Path(__file__).resolve().parents[1]
+    readme = " ".join((root / "README.md").read_text().split())
+    learning = " ".join((root / "docs" / "LEARNING.md").read_text().split())
+    assert (f"agree on {100 * agree / total:.1f} % of {total} paired trials over 8 objects "
+            f"(Clopper–Pearson 95 % {100 * lo:.1f}–{100 * hi:.1f} %") in readme
+    assert f"MJX fails where native succeeds {native_only} times, the reverse {mjx_only}" in readme
+    assert f"on {100 * agree / total:.1f} % ({agree}/{total}) under the current 20 N" in learning
 
 
 def test_trial_rates_20N_quoted():
@@ -449,6 +457,10 @@ def test_trial_rates_20N_quoted():
     assert f"{m['physics_steps_per_s'] / 1e6:.2f} M physics steps/s" in GRASP_DOC
     assert f"compile {gpu['backends']['mjx']['compile_s']:.0f} s" in GRASP_DOC
     assert round(100 * (1 - m["trials_per_s"] / 9438)) == 31
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    lo, hi = min(r["trials_per_s"] for r in rows), max(r["trials_per_s"] for r in rows)
+    assert f"runs {m['trials_per_s']:,.0f} trials/s at batch 32,768" in readme
+    assert f"Xeon cores {lo:.0f}–{hi:.0f} trials/s" in readme
     jobs = (RATE / "jobs.txt").read_text()
     assert "NVIDIA H100" in jobs and "exit 0" in jobs and "taskset -c 0,1" in jobs
     assert jobs.count("exit 0") == 10

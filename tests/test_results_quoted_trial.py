@@ -464,3 +464,35 @@ def test_trial_rates_20N_quoted():
     jobs = (RATE / "jobs.txt").read_text()
     assert "NVIDIA H100" in jobs and "exit 0" in jobs and "taskset -c 0,1" in jobs
     assert jobs.count("exit 0") == 10
+
+
+def test_candidate_success_under_20N_quoted():
+    """docs/GRASP.md's 'With the antipodal candidates' figures under the 20 N trial are the
+    shipped screen's mean candidate success."""
+    from sern_jax.grasp import artifacts
+
+    rows = {r["object"]: r for r in artifacts.load_theta0().screen["objects"]}
+    doc = " ".join(GRASP_DOC.split())
+    quoted = {"small_box": "small box", "sphere": "sphere", "cylinder": "cylinder",
+              "slim_bottle": "slim bottle", "round_stapler": "round stapler",
+              "bracket": "bracket", "pipe_tee": "pipe tee", "tilted_mouse": "tilted mouse",
+              "triangular_prism": "triangular prism", "tless_part_c": "tless_part_c",
+              "tless_part_c_steel": "tless_part_c_steel"}
+    for name, words in quoted.items():
+        assert f"{words} {rows[name]['mean_success']:.3f}" in doc, name
+    assert rows["triangular_prism"]["candidate_success_quartiles"][1] == 0.25
+    assert f"θ0 still grasps it at {rows['bracket']['greedy_success']:.2f}" in doc
+    low = sorted(rows, key=lambda n: rows[n]["mean_success"])[:3]
+    assert low == ["tless_part_c_steel", "triangular_prism", "tless_part_c"] and len(rows) == 26
+    assert "tless_part_c_steel 0.299, the lowest of the 26 screened objects" in doc
+
+
+@pytest.mark.parametrize("flag", ["--seeds", "--steps", "--test-trials"])
+def test_forgetting_bad_input_is_one_line_exit_2(tmp_path, capsys, flag):
+    from experiments import core_set_forgetting
+
+    with pytest.raises(SystemExit) as e:
+        core_set_forgetting.main([flag, "0", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and len(err.splitlines()) == 1 and flag in err
+    assert not (tmp_path / "out").exists()

@@ -496,3 +496,33 @@ def test_forgetting_bad_input_is_one_line_exit_2(tmp_path, capsys, flag):
     err = capsys.readouterr().err.strip()
     assert e.value.code == 2 and len(err.splitlines()) == 1 and flag in err
     assert not (tmp_path / "out").exists()
+
+
+def test_theory_6N_comparison_quoted():
+    """The previous (6 N) run's figures that the section compares with, from its kept files."""
+    from experiments.theory_on_grasping import summarise_file
+
+    d6 = RESULTS / "theory_grasping_6N"
+    res = json.loads((d6 / "results.json").read_text())
+    s = summarise_file(d6 / "per_context.npz")
+    _assert_same_summary(res["summary"], json.loads(json.dumps(s)))
+    assert res["config"]["objects"] == "pipe_tee,tless_part_a,tless_part_c"
+    other = json.loads((RESULTS / "theory_grasping_other_6N" / "results.json").read_text())
+    assert other["config"]["objects"] == "triangular_prism,handle_jug,tless_part_b"
+    sec = _theory_section()
+    assert (round(s["floor_median"], 3), s["error_below_floor_fraction_n160"]) == (0.097, 0)
+    assert "(6 N: floor median 0.097, no context below it.)" in sec
+    assert (round(s["slope_ctx_median"], 2), s["beta_ctx_above_1_fraction"]) == (-0.18, 1.0)
+    assert "under 6 N the median slope was −0.18 and β was above 1 in all 12 contexts" in sec
+    d = s["delta2"]["256"]
+    assert (_pct(d["zero_fraction"]), round(d["median"], 3),
+            s["delta2_split"]["resolved_holm"]) == (16.7, 0.008, 2)
+    assert ("under 6 N, Δ2 was 0 in 17 % of contexts at 256 trials (median 0.008) and the gap "
+            "was resolved in 2 of 12") in sec
+    a6 = s["per_object"]["tless_part_a"]
+    now = summarise_file(THEORY / "per_context.npz")["per_object"]["tless_part_a"]
+    quoted = (f"θ0's error was {a6['error_n0']:.2f} at n = 0 and {a6['error_n160']:.2f} at n = "
+              f"160 under 6 N (slope {a6['slope_mean']:.2f} ± {a6['slope_half']:.2f}), and is "
+              f"{now['error_n0']:.2f} and {now['error_n160']:.2f} now (slope "
+              f"{now['slope_mean']:.2f} ± {now['slope_half']:.2f})").replace("-", "−")
+    assert quoted in sec, quoted

@@ -12,7 +12,9 @@ import pytest
 from experiments import grasp_sensitivity, paper_table1
 
 RESULTS = Path(__file__).resolve().parents[1] / "experiments" / "results"
-SENS = RESULTS / "sensitivity"
+# The previous trial's grid (6 N θ0), kept as a record: experiments/results/sensitivity_6N
+# (its README holds its table); today's grid is experiments/results/sensitivity (below).
+SENS = RESULTS / "sensitivity_6N"
 
 
 def _pct(x):
@@ -64,6 +66,15 @@ def test_sensitivity_table(sens):
     means = [abs(c["comparisons"][k]["mean"]) for c in sens["cells"].values()
              for k in c["comparisons"]]
     assert _pct(max(means)) == 3.4
+    # the record's README prints this table
+    readme = [ln.strip() for ln in (SENS / "README.md").read_text().splitlines()]
+
+    def pm(m, h):
+        return f"{m:+.1f} ± {h:.1f}".replace("-", "−")
+
+    for t0, r5, g, e in quoted.values():
+        row = f"| {t0:.1f} % | {r5:.1f} % | {pm(*g)} | {pm(*e)} |"
+        assert any(ln.endswith(row) for ln in readme), row
 
 
 def test_transfer_numbers(sens):
@@ -86,6 +97,125 @@ def test_transfer_numbers(sens):
     gains = [v["round5_minus_theta0"]["mean"] for cell, cc in sens["cells"].items()
              if cell.startswith("20N") for v in cc["policies"].values()]
     assert (_pct(min(gains)), _pct(max(gains))) == (5.5, 15.9)
+
+
+# --- today's grid (20 N trial): experiments/results/sensitivity ---
+
+SENS_TODAY = RESULTS / "sensitivity"
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    out = tmp_path_factory.mktemp("grid")
+    for f in SENS_TODAY.glob("*.json"):
+        if f.name != "summary.json":
+            shutil.copy(f, out / f.name)
+    return json.loads(json.dumps(grasp_sensitivity.summarise(out)))
+
+
+def test_grid_summary_is_what_the_cells_give(grid):
+    assert json.loads((SENS_TODAY / "summary.json").read_text()) == grid
+
+
+def test_grid_cells_were_made_with_the_shipped_theta0_in_their_worlds():
+    from sern_jax.grasp import artifacts
+
+    theta0 = artifacts.load_theta0()
+    hard = artifacts.hard_set(theta0, 6)["objects"]
+    files = sorted(f for f in SENS_TODAY.glob("*.json")
+                   if f.name not in ("summary.json", "grid.json"))
+    assert [f.stem for f in files] == sorted(grasp_sensitivity.CELLS)
+    for f in files:
+        d = json.loads(f.read_text())
+        ctx, trial = grasp_sensitivity.world(f.stem)
+        assert d["theta0_digest"] == theta0.fingerprint, f
+        assert d["objects"] == hard and (d["seeds"], d["rounds"], d["rounds_done"]) == (10, 5, 5)
+        assert d["trial_config"] == json.loads(json.dumps(dataclasses.asdict(trial))), f
+        assert d["scene_config"] == json.loads(json.dumps(dataclasses.asdict(ctx.scene))), f
+        assert d["world"]["depth_noise"] == ("realsense" if f.stem.endswith("d435") else "none")
+        assert d["command"].startswith("python -m experiments.grasp_sensitivity cell " + f.stem)
+        assert d["machine"]["cpu"] and d["machine"]["jax_devices"] == ["cuda:0"], f
+
+
+def test_grid_refuses_mixing_trials_and_settings(tmp_path):
+    """Today's cells with the previous trial's, or a cell of another θ0, are refused; so is
+    a cell run into a grid directory made with other seeds (one line naming --out, exit 2,
+    before anything is computed)."""
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    shutil.copy(SENS_TODAY / "20N_mu0.3-0.8_clean.json", mixed)
+    shutil.copy(SENS / "20N_mu0.3-0.8_clean.json", mixed / "x_20N_mu0.3-0.8_clean.json")
+    with pytest.raises(ValueError, match="mixes today's cell files with the previous"):
+        grasp_sensitivity.summarise(mixed)
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("20N_mu0.3-0.8_clean.json", "10N_mu0.3-0.8_clean.json"):
+        shutil.copy(SENS_TODAY / name, other)
+    grasp_sensitivity.summarise(other)  # control: the same files, unchanged, are accepted
+    d = json.loads((other / "10N_mu0.3-0.8_clean.json").read_text())
+    d["theta0_digest"] = "another"
+    (other / "10N_mu0.3-0.8_clean.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="theta0_digest"):
+        grasp_sensitivity.summarise(other)
+    d = json.loads((SENS_TODAY / "10N_mu0.3-0.8_clean.json").read_text())
+    d["scene_config"]["finger_force"] = 20.0  # a 10 N cell's file made in another world
+    (other / "10N_mu0.3-0.8_clean.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="scene_config"):
+        grasp_sensitivity.summarise(other)
+    pinned = tmp_path / "pinned"
+    pinned.mkdir()
+    shutil.copy(SENS_TODAY / "grid.json", pinned)
+    with pytest.raises(SystemExit) as exc:
+        grasp_sensitivity.main(["cell", "20N_mu0.3-0.8_clean", "--out", str(pinned),
+                                "--seeds", "3"])
+    assert exc.value.code == 2 and sorted(p.name for p in pinned.iterdir()) == ["grid.json"]
+    with pytest.raises(SystemExit) as exc:  # the previous trial's folder
+        grasp_sensitivity.main(["cell", "20N_mu0.3-0.8_clean", "--out", str(SENS)])
+    assert exc.value.code == 2
+
+
+def test_grid_table_and_prose_quoted(grid):
+    assert grasp_sensitivity.sensitivity_markdown(grid) in DOC
+    cells = grid["cells"]
+    assert grid["cells_missing"] == [] and grid["cells_stopped"] == {}
+    comps = [v for c in cells.values() for v in c["comparisons"].values()]
+    assert len(comps) == 16 and grid["resolved"] == []
+    # no interval excludes 0 even before Holm; smallest raw p 0.10, every Holm p 1.00
+    assert all(v["lower"] < 0 < v["upper"] for v in comps)
+    assert round(min(v["pvalue"] for v in comps), 2) == 0.10
+    assert round(min(v["pvalue_holm"] for v in comps), 2) == 1.0
+    assert (_pct(min(v["mean"] for v in comps)), _pct(max(v["mean"] for v in comps))) == (
+        -2.8, 2.0)
+    assert (_pct(min(v["half"] for v in comps)), _pct(max(v["half"] for v in comps))) == (
+        2.5, 6.2)
+    assert (_pct(min(v["lower"] for v in comps)), _pct(max(v["upper"] for v in comps))) == (
+        -7.5, 6.0)
+    assert sorted(round(c["seconds"]) for c in cells.values())[::7] == [432, 474]
+    # 40 seeds instead of 10: half-widths / 2 (1/sqrt(n))
+    assert (_pct(min(v["half"] for v in comps) / 2), _pct(max(v["half"] for v in comps) / 2)
+            ) == (1.2, 3.1)
+    assert _pct(cells["10N_mu0.2-0.5_clean"]["theta0"]["mean"]) == 27.7
+    t = grid["transfer"]
+    assert _pct(t["20N_mu0.3-0.8_clean"]["theta0_B"]) == 77.8
+    gaps = {c: (_pct(v["gap"]["mean"]), _pct(v["gap"]["half"])) for c, v in t.items()}
+    assert gaps == {"20N_mu0.3-0.8_clean": (0.0, 0.0), "20N_mu0.3-0.8_d435": (-1.1, 3.5),
+                    "20N_mu0.2-0.5_clean": (21.2, 1.9), "20N_mu0.2-0.5_d435": (20.1, 3.8),
+                    "10N_mu0.3-0.8_clean": (26.4, 2.7), "10N_mu0.3-0.8_d435": (25.2, 3.6),
+                    "10N_mu0.2-0.5_clean": (50.1, 2.8), "10N_mu0.2-0.5_d435": (50.2, 2.7)}
+
+    def rec(cell, r):
+        v = [t[cell]["policies"][p][f"recovered_round{r}"] for p in ("sern", "egreedy",
+                                                                     "greedy")]
+        return round(100 * min(v)), round(100 * max(v))
+
+    assert rec("20N_mu0.2-0.5_clean", 5) == (153, 163)
+    assert rec("10N_mu0.3-0.8_clean", 5) == (95, 105)
+    assert rec("10N_mu0.2-0.5_clean", 5) == (69, 73)
+    assert rec("10N_mu0.2-0.5_d435", 5) == (75, 78)
+    gain_a = [t["20N_mu0.3-0.8_clean"]["policies"][p]["gain_round5"] for p in
+              ("sern", "egreedy", "greedy")]
+    assert [(_pct(g["mean"]), _pct(g["half"])) for g in gain_a] == [
+        (15.5, 2.9), (15.5, 3.7), (15.2, 3.7)]
 
 
 def test_fixed_pose_evaluation_noise():

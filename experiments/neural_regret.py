@@ -64,12 +64,23 @@ class NeuralRegretExperiment:
     seed: int = 0
     num_checkpoints: int = 16
     chunk_size: int = 100
+    nl_prior_mean: str = "network"  # neural_lints/neural_linucb: --nl-prior-mean
+    nl_sigma2: str = "arm"  # neural_lints/neural_linucb: --nl-sigma2 (arm | pooled)
 
     def fingerprint(self) -> str:
-        """Hash of the fields that change results (not the chunk size)."""
+        """Hash of the fields that change results (not the chunk size). The Neural-Linear
+        options enter only when they differ from what every run made before they existed
+        used (network, arm), so those runs keep their fingerprint and resume."""
         d = dataclasses.asdict(self)
         d.pop("chunk_size")
+        for name, before in _LEGACY.items():
+            if d[name] == before:
+                d.pop(name)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+# Neural-Linear options and the value runs made before the option existed used.
+_LEGACY = {"nl_prior_mean": "network", "nl_sigma2": "arm"}
 
 
 def _learner_name(policy: str) -> str:
@@ -115,6 +126,14 @@ def _check(exp: NeuralRegretExperiment) -> None:
     if not exp.learning_rate >= float(np.finfo(np.float32).tiny) or exp.learning_rate > 1e30:
         raise ValueError(f"--learning-rate must be a positive normal float32 number, got "
                          f"{exp.learning_rate!r}")
+    from sern_jax.learners import neural_linear
+
+    if exp.nl_prior_mean not in neural_linear.PRIOR_MEANS:
+        raise ValueError(f"--nl-prior-mean must be one of "
+                         f"{', '.join(neural_linear.PRIOR_MEANS)}, got {exp.nl_prior_mean!r}")
+    if exp.nl_sigma2 not in neural_linear.SIGMA2_MODES:
+        raise ValueError(f"--nl-sigma2 must be one of {', '.join(neural_linear.SIGMA2_MODES)}, "
+                         f"got {exp.nl_sigma2!r}")
     if exp.schedule != "constant":
         raise ValueError(f"--schedule applies to the tabular estimators; with --estimator "
                          f"neural use --policies sern (fixed --alpha) or sern_log "
@@ -124,7 +143,8 @@ def _check(exp: NeuralRegretExperiment) -> None:
 def _hyper(exp: NeuralRegretExperiment) -> dict:
     """Command-line values by the registry's hyperparameter names (--alpha is sern's α and
     sern_log's α0)."""
-    return {"alpha": exp.alpha0, "alpha0": exp.alpha0, "p": exp.p, "epsilon": exp.epsilon}
+    return {"alpha": exp.alpha0, "alpha0": exp.alpha0, "p": exp.p, "epsilon": exp.epsilon,
+            "nl_prior_mean": exp.nl_prior_mean, "nl_sigma2": exp.nl_sigma2}
 
 
 def build_runs(exp: NeuralRegretExperiment):

@@ -70,6 +70,8 @@ def test_resume_equals_uninterrupted_and_aliases(run_dir, tmp_path):
     (["--fit-steps", "0"], "--fit-steps"),
     (["--learning-rate", "-1"], "--learning-rate"),
     (["--float64"], "--float64"),
+    (["--nl-sigma2", "shared"], "--nl-sigma2"),
+    (["--nl-prior-mean", "one"], "--nl-prior-mean"),
 ])
 def test_bad_input_is_one_line_naming_the_flag(extra, flag, tmp_path, capsys):
     out = tmp_path / "bad"
@@ -84,3 +86,22 @@ def test_problem_without_neural_estimator_is_refused(tmp_path, capsys):
     assert cli.main(["regret", "--problem", "wheel", "--out", str(out)]) == 2
     assert "--problem" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_neural_linear_flags_are_refused_by_the_tabular_estimators(tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert cli.main(["regret", "--nl-sigma2", "pooled", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--nl-sigma2" in err and "\n" not in err
+    assert not out.exists()
+
+
+def test_neural_linear_options_enter_the_fingerprint_only_when_set():
+    """Runs made before --nl-sigma2 / --nl-prior-mean existed (arm, network) keep their
+    fingerprint, so they resume; another value is another run."""
+    from experiments.neural_regret import NeuralRegretExperiment as Exp
+
+    legacy = Exp()
+    assert legacy.fingerprint() == Exp(nl_sigma2="arm", nl_prior_mean="network").fingerprint()
+    assert legacy.fingerprint() != Exp(nl_sigma2="pooled").fingerprint()
+    assert legacy.fingerprint() != Exp(nl_prior_mean="zero").fingerprint()

@@ -70,6 +70,13 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="neural: rows per minibatch step")
     p.add_argument("--learning-rate", type=float, default=_NEURAL.learning_rate,
                    help="neural: Adam step size")
+    p.add_argument("--nl-prior-mean", default=None,
+                   help=f"neural: neural_lints/neural_linucb centre their regression on the "
+                        f"network's r̂ (network) or on 0 (zero) (default {_NEURAL.nl_prior_mean})")
+    p.add_argument("--nl-sigma2", default=None,
+                   help=f"neural: neural_lints/neural_linucb keep one noise variance σ² per "
+                        f"arm (arm) or one shared by the arms (pooled) (default "
+                        f"{_NEURAL.nl_sigma2})")
     p.add_argument("--context-dim", type=int, default=_NEURAL.context_dim,
                    help="neural finite/linear problems: context feature dimension d")
     p.add_argument("--arms", type=int, default=None,
@@ -163,7 +170,9 @@ def _run_neural(args, make_figures: Callable | None) -> int:
         hidden=hidden, fit_steps=args.fit_steps, batch_size=args.batch_size,
         learning_rate=args.learning_rate, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
         schedule=args.schedule, seed=args.seed, num_checkpoints=args.checkpoints,
-        chunk_size=_or(args.chunk_size, nd.chunk_size))
+        chunk_size=_or(args.chunk_size, nd.chunk_size),
+        nl_prior_mean=_or(args.nl_prior_mean, nd.nl_prior_mean),
+        nl_sigma2=_or(args.nl_sigma2, nd.nl_sigma2))
     out = Path(args.out) if args.out else Path("runs") / f"regret-neural-{exp.fingerprint()}"
     run_dir = mod.run_experiment(exp, out, progress=not args.no_progress)
     print((run_dir / "report.md").read_text())
@@ -187,6 +196,10 @@ def run(args, *, defaults: Any, run_experiment: Callable,
     if args.problem != "bernoulli":
         raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
                          f"estimators run --problem bernoulli)")
+    for flag in ("nl_prior_mean", "nl_sigma2"):
+        if getattr(args, flag) is not None:
+            raise ValueError(f"--{flag.replace('_', '-')} applies to --estimator neural, not "
+                             f"the tabular estimators")
     d = defaults
     exp = dataclasses.replace(
         defaults, policies=(d.policies if args.policies is None else

@@ -46,6 +46,14 @@ arms as they arrive, so a refit sums each arm's own rows only, in chunks
 (:func:`_refit_arms`): ~N(d + 1)² work for N rows, not K²·N(d + 1)². The grasp network
 returns plain features (one shared β, as above).
 
+Noise variance (``--nl-sigma2``). ``arm`` (default): each arm's own σ² ~ IG(a_g, b_g), as
+the Showdown's ``NeuralLinearPosteriorSampling`` keeps ``a[i]``, ``b[i]`` per action
+(tensorflow/models research/deep_contextual_bandits). ``pooled``: one σ² for all arms, the
+exact closed form of one regression on the block features onehot(arm) ⊗ φ with β_g | σ²
+independent (Λ is block diagonal, so the arms' μ_g, Λ_g are unchanged and only (a, b) pool
+every arm's rows); a Thompson draw then takes one σ² for all arms. With a shared β (plain
+features) there is one σ² either way.
+
 Cost per decision. Each refit also caches ``U = L⁻ᵀ`` (``Posterior.chol_inv_t``), so a
 Thompson draw ``β = μ + σ U z`` and UCB's ``φᵀΛ⁻¹φ = |Uᵀφ|²`` are matrix products, with no
 triangular solve per decision.
@@ -74,6 +82,7 @@ from sern_jax.types import Array, Key
 
 __all__ = [
     "PRIOR_MEANS",
+    "SIGMA2_MODES",
     "ArmFeatures",
     "NeuralLinTSConfig",
     "NeuralLinUCBConfig",
@@ -101,12 +110,26 @@ _PRIOR = {  # name: (default, flag, help); shared by both learners (one flag eac
 
 
 PRIOR_MEANS = ("network", "zero")
+SIGMA2_MODES = ("arm", "pooled")
 
 
 def _prior_mean_field():
     return dataclasses.field(default="network", metadata={
         "flag": "--nl-prior-mean", "help": "neural_lints/neural_linucb: centre the "
         "regression on the network's r̂ (network: r = r̂ + φ·β) or on 0 (zero: the Showdown's)"})
+
+
+def _sigma2_field():
+    return dataclasses.field(default="arm", metadata={
+        "flag": "--nl-sigma2", "help": "neural_lints/neural_linucb with one posterior per arm: "
+        "each arm its own noise variance σ² (arm: the Showdown's NeuralLinear) or one σ² "
+        "shared by the arms (pooled); no effect with a shared β"})
+
+
+def _check_sigma2(value) -> None:
+    if value not in SIGMA2_MODES:
+        raise ValueError(f"--nl-sigma2 must be one of {', '.join(SIGMA2_MODES)}, "
+                         f"got {value!r}")
 
 
 def _check_prior_mean(value) -> None:
@@ -128,11 +151,13 @@ class NeuralLinTSConfig:
     a0: float = _prior("a0")
     b0: float = _prior("b0")
     nl_prior_mean: str = _prior_mean_field()
+    nl_sigma2: str = _sigma2_field()
 
     def __post_init__(self):
         for name in ("lambda_prior", "a0", "b0"):
             base.check_positive("--" + name.replace("_", "-"), getattr(self, name))
         _check_prior_mean(self.nl_prior_mean)
+        _check_sigma2(self.nl_sigma2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,11 +171,13 @@ class NeuralLinUCBConfig:
         "flag": "--ucb-width", "help": "neural_linucb: c in φ·μ + c·sqrt(b/a φᵀΛ⁻¹φ) "
         "(LinUCB's α; default 1)"})
     nl_prior_mean: str = _prior_mean_field()
+    nl_sigma2: str = _sigma2_field()
 
     def __post_init__(self):
         for name in ("lambda_prior", "a0", "b0", "ucb_width"):
             base.check_positive("--" + name.replace("_", "-"), getattr(self, name))
         _check_prior_mean(self.nl_prior_mean)
+        _check_sigma2(self.nl_sigma2)
 
 
 class ArmFeatures(NamedTuple):
@@ -257,10 +284,17 @@ def _arm_sums(phi: Array, arm: Array, y: Array, w: Array) -> tuple:
             jnp.sum(wa * (y * y)[:, None], axis=0), jnp.sum(wa, axis=0))
 
 
-def _arm_posteriors(sums: tuple, lambda_prior: Array, a0: Array, b0: Array) -> Posterior:
+def _arm_posteriors(sums: tuple, lambda_prior: Array, a0: Array, b0: Array,
+                    pooled: bool = False) -> Posterior:
     """The per-arm posteriors from :func:`_arm_sums`' statistics. ``b`` is written
     ``b0 + ½(Σ w y² − μᵀΛμ)`` (equal to the residual form: Λμ = Σ w φ y), clipped at b0
-    against float32 rounding."""
+    against float32 rounding.
+
+    ``pooled``: one σ² for all arms. The model is then one Bayesian regression on the block
+    features onehot(arm) ⊗ φ with σ² ~ IG(a0, b0) and β_g | σ² ~ N(0, σ²/λ I) independent
+    across arms: Λ is block diagonal, so each arm's (μ_g, Λ_g) is unchanged and
+    ``a = a0 + ½ Σ_g n_g``, ``b = b0 + ½ Σ_g (Σ w y² − μ_g·Λ_g μ_g)`` (every arm's ``a``,
+    ``b`` fields hold these same values)."""
     grams, phi_y, yy, wsum = sums
     d = grams.shape[-1]
 
@@ -272,23 +306,32 @@ def _arm_posteriors(sums: tuple, lambda_prior: Array, a0: Array, b0: Array) -> P
         b = b0 + 0.5 * jnp.maximum(y2 - jnp.dot(mean, py), 0.0)
         return Posterior(mean, precision, chol, a0 + 0.5 * n, b, u)
 
-    return jax.vmap(one)(grams, phi_y, yy, wsum)
+    post = jax.vmap(one)(grams, phi_y, yy, wsum)
+    if pooled:
+        a = a0 + 0.5 * jnp.sum(wsum)
+        b = b0 + jnp.sum(post.b - b0)
+        post = post._replace(a=jnp.broadcast_to(a, post.a.shape),
+                             b=jnp.broadcast_to(b, post.b.shape))
+    return post
 
 
 def fit_arm_posteriors(phi: Array, arm: Array, y: Array, w: Array, lambda_prior: Array,
-                       a0: Array, b0: Array) -> Posterior:
+                       a0: Array, b0: Array, pooled: bool = False) -> Posterior:
     """One Normal-inverse-Gamma posterior per arm, each the closed form of
-    :func:`fit_posterior` on its arm's rows alone (fields with a leading [G] axis).
+    :func:`fit_posterior` on its arm's rows alone (fields with a leading [G] axis); with
+    ``pooled``, one σ² shared by the arms (the closed form on the block features
+    onehot(arm) ⊗ φ; see :func:`_arm_posteriors`).
 
     Args:
       phi: [N, d] design rows.
       arm: [N, G] one-hot arm of each row (G static).
       y, w: [N] targets and weights (w = 0: an empty row).
+      pooled: static; one σ² for all arms.
     """
     phi = jnp.asarray(phi, jnp.float32)
     w = jnp.maximum(jnp.asarray(w, jnp.float32), 0.0)
     sums = _arm_sums(phi, jnp.asarray(arm, jnp.float32), jnp.asarray(y, jnp.float32), w)
-    return _arm_posteriors(sums, lambda_prior, a0, b0)
+    return _arm_posteriors(sums, lambda_prior, a0, b0, pooled)
 
 
 def _select(values: Array, arm) -> Array:
@@ -317,18 +360,24 @@ def ucb_index(posterior: Posterior, phi: Array, width: Array,
 
 
 def thompson_scores(key: Key, posterior: Posterior, phi: Array,
-                    arm: Array | None = None) -> Array:
+                    arm: Array | None = None, pooled: bool = False) -> Array:
     """One posterior draw's scores ``φ·β``, σ² ~ IG(a, b), β ~ N(μ, σ² Λ⁻¹) (per-arm
-    posteriors: one independent draw per arm, ``arm`` [K, G]). key is consumed.
+    posteriors: one independent draw per arm, ``arm`` [K, G]; with ``pooled`` one σ² draw
+    shared by the arms, then β_g ~ N(μ_g, σ² Λ_g⁻¹) independently). key is consumed.
 
     Args:
       phi: [K, d].
+      pooled: static; the per-arm posterior's σ² is shared (all a, b fields equal).
 
     Returns:
       [K] scores.
     """
     key_s, key_b = jax.random.split(key)
-    sigma2 = posterior.b / jax.random.gamma(key_s, posterior.a)  # [] or [G]
+    if pooled and posterior.a.ndim:
+        sigma2 = jnp.broadcast_to(posterior.b[0] / jax.random.gamma(key_s, posterior.a[0]),
+                                  posterior.a.shape)  # [G], one draw
+    else:
+        sigma2 = posterior.b / jax.random.gamma(key_s, posterior.a)  # [] or [G]
     z = jax.random.normal(key_b, posterior.mean.shape, jnp.float32)  # [d] or [G, d]
     # β = μ + σ U z has covariance σ² U Uᵀ = σ² Λ⁻¹ (U = L⁻ᵀ).
     uz = jnp.einsum("...de,...e->...d", posterior.chol_inv_t, z,
@@ -379,7 +428,7 @@ def _index_rows(model: base.Model, state: base.LearnerState, batch: base.Batch,
 
 
 def _refit_arms(model: base.Model, state: base.LearnerState, centred: bool,
-                horizon: int) -> Posterior:
+                horizon: int, pooled: bool = False) -> Posterior:
     """Per-arm posteriors on D ∪ C: arm g sums its own rows of D (``extra.arm_rows``) in
     chunks, a loop as long as its row count, so neither D's empty rows nor the other arms'
     rows cost anything (under vmap the loop runs to the largest count over seeds); the
@@ -418,17 +467,17 @@ def _refit_arms(model: base.Model, state: base.LearnerState, centred: bool,
     per_arm = [one_arm(g) for g in range(grams.shape[0])]
     sums = tuple(total + jnp.stack(parts) for total, parts in
                  zip((grams, phi_y, yy, wsum), zip(*per_arm)))
-    return _arm_posteriors(sums, ex.lambda_prior, ex.a0, ex.b0)
+    return _arm_posteriors(sums, ex.lambda_prior, ex.a0, ex.b0, pooled)
 
 
 def _refit(model: base.Model, state: base.LearnerState, centred: bool,
-           horizon: int) -> base.LearnerState:
+           horizon: int, pooled: bool = False) -> base.LearnerState:
     """The posterior(s) on D ∪ C with the current θ's features (targets y − r̂_θ when
     centred)."""
     buf = state.buffer
     ex = state.extra
     if isinstance(model.features(state.params, *(x[:1] for x in buf.inputs)), ArmFeatures):
-        post = _refit_arms(model, state, centred, horizon)
+        post = _refit_arms(model, state, centred, horizon, pooled)
     else:
         phi, _ = _design(model, state.params, buf.inputs)
         y = buf.reward - _offset(model, state.params, buf.inputs, centred)
@@ -439,6 +488,7 @@ def _refit(model: base.Model, state: base.LearnerState, centred: bool,
 def _make(model: base.Model, train: base.TrainConfig, config, thompson: bool) -> base.Learner:
     width = 0.0 if thompson else config.ucb_width
     centred = config.nl_prior_mean == "network"
+    pooled = config.nl_sigma2 == "pooled"
 
     def extra_fn(key):
         del key
@@ -460,20 +510,20 @@ def _make(model: base.Model, train: base.TrainConfig, config, thompson: bool) ->
                                   jnp.float32(config.a0), jnp.float32(config.b0),
                                   jnp.float32(width), jnp.zeros(rows, jnp.int32),
                                   jnp.zeros(rows[:1], jnp.int32))
-        return _refit(model, state._replace(extra=extra), centred, train.horizon)
+        return _refit(model, state._replace(extra=extra), centred, train.horizon, pooled)
 
     def update(key: Key, state: base.LearnerState, batch: base.Batch) -> base.LearnerState:
         start = state.buffer.count
         state = neural_update(key, state, batch)
         if state.extra.arm_rows.shape[0]:  # per-arm posteriors: file the new rows
             state = _index_rows(model, state, batch, start)
-        return _refit(model, state, centred, train.horizon)
+        return _refit(model, state, centred, train.horizon, pooled)
 
     def act(key: Key, state: base.LearnerState, obs: base.Obs):
         phi, arm = _design(model, state.params, obs.inputs)  # [K, d + 1], [K, G] | None
         post = state.extra.posterior
         if thompson:
-            scores = thompson_scores(key, post, phi, arm)
+            scores = thompson_scores(key, post, phi, arm, pooled)
         else:
             scores = ucb_index(post, phi, state.extra.ucb_width, arm)
         scores = scores + _offset(model, state.params, obs.inputs, centred)

@@ -27,6 +27,12 @@ given ``scale_reward(r) = clip((r − lo)/(hi − lo), 0, 1)`` with ``reward_ran
 draw is clipped only beyond 10 standard deviations (probability < 1e-22) and the scaled
 expected reward is the scaled mean up to that.
 
+Traced problem parameters. A problem may carry ``params`` (a NamedTuple of arrays, the
+wheel's :class:`WheelParams` (δ)) and ``bind(params) -> BoundProblem``, the same functions
+with the parameters as traced values. The runner's ``run(key, params)`` then takes δ as an
+argument, so one compiled program serves a δ sweep (``neural_runner.run_seeds(...,
+params=...)``); without ``params`` it closes over the problem's own values, as before.
+
 Core module: jax and numpy only. Keys are consumed.
 """
 
@@ -45,7 +51,9 @@ from sern_jax.types import Array, Key
 __all__ = [
     "PROBLEM_NAMES",
     "WHEEL_DELTAS",
+    "BoundProblem",
     "ContextualBandit",
+    "WheelParams",
     "wheel",
     "wheel_expected_rewards",
     "wheel_optimal_arm",
@@ -60,6 +68,21 @@ WHEEL_DELTAS = (0.5, 0.7, 0.9, 0.95, 0.99)  # Riquelme et al.'s (and edward2's) 
 _WHEEL_MEAN_V = (1.0, 1.0, 1.0, 1.0, 1.2)
 _WHEEL_MU_LARGE = 50.0
 _WHEEL_STD_LARGE = 0.01
+
+
+class WheelParams(NamedTuple):
+    """The wheel's traced parameter."""
+
+    delta: Array  # [] float32 δ ∈ (0, 1)
+
+
+class BoundProblem(NamedTuple):
+    """A problem's functions with its parameters bound as traced values (``bind(params)``)."""
+
+    sample_context: Callable[[Key], Array]
+    expected_rewards: Callable[[Array], Array]
+    sample_rewards: Callable[[Key, Array], Array]
+    mu_star: Array  # [] max_a E_x r_a(x) (the paper's comparator), traced
 
 
 class ContextualBandit(NamedTuple):
@@ -78,6 +101,8 @@ class ContextualBandit(NamedTuple):
     arm_means: np.ndarray  # [K] float64 E_x r_a(x), exact (the paper's regret uses max of it)
     gap2: float | None  # Assumption 1's Δ2 = min_x (best − second best), where it is > 0
     contexts: np.ndarray | None = None  # [M, d] the finite problem's contexts (else None)
+    params: NamedTuple | None = None  # traceable parameters (wheel: WheelParams), or None
+    bind: Callable | None = None  # params -> BoundProblem (None: no traced parameters)
 
     def scale_reward(self, reward: Array) -> Array:
         """Rewards in the problem's units -> [0, 1] (what the learners fit)."""
@@ -150,6 +175,19 @@ def wheel(delta: float, noise_sd: float = 0.01, dtype=jnp.float32) -> Contextual
     noise_sd = _check_nonneg("--noise-sd", noise_sd)
     q = (1.0 - delta * delta) / 4.0
     arm_means = np.array([1.0 + (_WHEEL_MU_LARGE - 1.0) * q] * 4 + [1.2])
+    fns = _wheel_functions(delta, noise_sd, dtype)
+    return ContextualBandit(
+        name=f"wheel(delta={delta:g})", num_arms=5, context_dim=2,
+        sample_context=fns.sample_context, expected_rewards=fns.expected_rewards,
+        sample_rewards=fns.sample_rewards,
+        reward_range=(0.0, _WHEEL_MU_LARGE + 10.0 * _WHEEL_STD_LARGE),
+        arm_means=arm_means, gap2=None,
+        params=WheelParams(np.float32(delta)),
+        bind=lambda params: _wheel_functions(params.delta, noise_sd, dtype))
+
+
+def _wheel_functions(delta, noise_sd: float, dtype) -> BoundProblem:
+    """The wheel's functions for δ (a Python float: a constant; an array: traced)."""
 
     def sample_context(key: Key) -> Array:
         key_r, key_angle = jax.random.split(key)
@@ -165,12 +203,9 @@ def wheel(delta: float, noise_sd: float = 0.01, dtype=jnp.float32) -> Contextual
         sd = jnp.where(means == _WHEEL_MU_LARGE, _WHEEL_STD_LARGE, noise_sd).astype(dtype)
         return means + sd * jax.random.normal(key, (5,), dtype)
 
-    return ContextualBandit(
-        name=f"wheel(delta={delta:g})", num_arms=5, context_dim=2,
-        sample_context=sample_context, expected_rewards=expected_rewards,
-        sample_rewards=sample_rewards,
-        reward_range=(0.0, _WHEEL_MU_LARGE + 10.0 * _WHEEL_STD_LARGE),
-        arm_means=arm_means, gap2=None)
+    # max(1 + 49 (1 − δ²)/4, 1.2): arms 0–3 on average, or arm 4
+    mu_star = jnp.maximum(1.0 + (_WHEEL_MU_LARGE - 1.0) * (1.0 - delta * delta) / 4.0, 1.2)
+    return BoundProblem(sample_context, expected_rewards, sample_rewards, mu_star)
 
 
 # ----------------------------------------------------------------------------- finite

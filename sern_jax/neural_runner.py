@@ -1,9 +1,12 @@
 """The batched runner for neural learners on exact-reward problems: ``jit(vmap(scan))``.
 
-``make_run(config, problem, learner, model)`` returns ``run(key) -> NeuralRunOutput`` for one
-seed; :func:`run_seeds` vmaps it over seeds ``fold_in(key(seed), i)`` (the tabular engine's
-:func:`sern_jax.simulate.seed_keys`) in fixed-shape chunks, so seed i gives the same result
-alone or among 10,000.
+``make_run(config, problem, learner, model)`` returns ``run(key, params=None) ->
+NeuralRunOutput`` for one seed; :func:`run_seeds` vmaps it over seeds ``fold_in(key(seed), i)``
+(the tabular engine's :func:`sern_jax.simulate.seed_keys`) in fixed-shape chunks, so seed i
+gives the same result alone or among 10,000. ``params``: the problem's traced parameters
+(``contextual_problems.WheelParams``: δ), so a δ sweep is one compiled program
+(``run_seeds(run, ..., params=WheelParams(δ))``); None: the problem's own values, closed
+over.
 
 One seed carries its learner's :class:`~sern_jax.learners.base.LearnerState` (network
 parameters, optimiser state, a fixed-size buffer of ``T`` rows, learner extras) through a
@@ -103,6 +106,9 @@ class NeuralDiag(NamedTuple):
     inv_sqrt_chosen: Array  # Σ_t (n_{a_t}(phase start) + 1)^{-1/2}
     table_err: Array  # [G, M, K] |r̂_a(s) − r_a(s)| at the checkpoint (M = 0: no table)
     table_counts: Array  # [G, M, K] int32 n_{s,a}: pulls of arm a in context s so far
+    inv_sqrt_best: Array  # Σ_t (n_{a*}(phase start) + 1)^{-1/2}, a* = argmax_a E_x r_a(x)
+    misid: Array  # Σ_t 1{â*_t ≠ a*}, â*_t = argmax_a mean_s r̂_a(s) over the finite
+    #               problem's contexts with the acting state (0 without a context table)
 
 
 class NeuralRunOutput(NamedTuple):
@@ -211,7 +217,8 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
     ends = phases.astype(np.int32)
     mu_star = float(np.max(problem.arm_means))
     lo, hi = problem.reward_range
-    num_diag = 4 if config.diagnostics else 0
+    num_diag = 6 if config.diagnostics else 0
+    a_star = int(np.argmax(problem.arm_means))  # the paper's a* (first of ties)
     table = (problem.contexts if config.diagnostics and problem.contexts is not None
              else np.zeros((0, d)))
     num_table = table.shape[0]
@@ -231,7 +238,15 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
                          f"{state_shape.buffer.reward.shape[0]} rows (TrainConfig.horizon)")
     eye = jnp.eye(num_arms, dtype=jnp.float32)
 
-    def run(key: Key) -> NeuralRunOutput:
+    def run(key: Key, params=None) -> NeuralRunOutput:
+        if params is None:  # the problem's own values, closed over (constants)
+            fns, mu_star_t = problem, mu_star
+        else:  # traced: one program for every value
+            if config.diagnostics:
+                raise ValueError("diagnostics use the problem's own parameters: run(key) "
+                                 "without params")
+            fns = problem.bind(params)
+            mu_star_t = fns.mu_star
         key_env = jax.random.fold_in(jax.random.fold_in(key, ENV_STREAM), ROUNDS_STREAM)
         key_agent = jax.random.fold_in(key, AGENT_STREAM)
         key_u = jax.random.fold_in(key_agent, ROUNDS_STREAM)
@@ -245,9 +260,9 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
         def decide(state, t):
             """One decision at round t (0-based) on the phase's state."""
             key_t = jax.random.fold_in(key_env, t)
-            x = problem.sample_context(jax.random.fold_in(key_t, 0))
-            rewards = problem.sample_rewards(jax.random.fold_in(key_t, 1), x)  # [K]
-            means = problem.expected_rewards(x)  # [K]
+            x = fns.sample_context(jax.random.fold_in(key_t, 0))
+            rewards = fns.sample_rewards(jax.random.fold_in(key_t, 1), x)  # [K]
+            means = fns.expected_rewards(x)  # [K]
             z = jnp.concatenate([jnp.broadcast_to(x.astype(jnp.float32), (num_arms, d)), eye],
                                 axis=1)
             obs = base.Obs(inputs=(z,), valid=jnp.ones((num_arms,), bool),
@@ -257,8 +272,8 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
             a = jnp.maximum(action, 0)
             best = jnp.max(means)
             r_pi = jnp.dot(probs, means)
-            increments = jnp.stack([best - means[a], mu_star - means[a], best - r_pi,
-                                    mu_star - r_pi])
+            increments = jnp.stack([best - means[a], mu_star_t - means[a], best - r_pi,
+                                    mu_star_t - r_pi])
             if config.diagnostics:
                 scaled = problem.scale_reward(means)
                 err = jnp.abs(predict(state, obs) - scaled)
@@ -284,9 +299,15 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
             new_diag = carry.diag
             if config.diagnostics:
                 inv_sqrt = 1.0 / jnp.sqrt(carry.counts.astype(jnp.float32) + 1.0)
+                if num_table:  # â* of the state that acted in this phase
+                    r_hat = table_predictions(carry.state)  # [M, K]
+                    misid = (jnp.argmax(jnp.mean(r_hat, axis=0)) != a_star).astype(jnp.float32)
+                else:
+                    misid = jnp.zeros((), jnp.float32)
                 new_diag = carry.diag + jnp.stack([
                     jnp.sum(diag[0]), jnp.sum(diag[1]), jnp.sum(diag[2]),
-                    jnp.sum(inv_sqrt[jnp.maximum(action, 0)])])
+                    jnp.sum(inv_sqrt[jnp.maximum(action, 0)]), e * inv_sqrt[a_star],
+                    e * misid])
             table_counts = carry.table_counts
             if num_table:
                 table_counts = table_counts.at[ctx].add(chosen)
@@ -294,15 +315,19 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
                           comp, comp_err, jnp.minimum(carry.min_prob, jnp.min(probs)),
                           new_diag, table_counts)
 
-        def table_errors(state):
-            """|r̂ − r| [M, K] on every context (scaled units) with the current state."""
+        def table_predictions(state):
+            """r̂ [M, K] on every context of the table with ``state``."""
             def one(x):
                 z = jnp.concatenate([jnp.broadcast_to(x, (num_arms, d)), eye], axis=1)
                 obs = base.Obs(inputs=(z,), valid=jnp.ones((num_arms,), bool),
                                u=jnp.zeros((), jnp.float32), t=jnp.zeros((), jnp.int32))
-                return jnp.abs(predict(state, obs)
-                               - problem.scale_reward(problem.expected_rewards(x)))
+                return predict(state, obs)
             return jax.vmap(one)(table_x)
+
+        def table_errors(state):
+            """|r̂ − r| [M, K] on every context (scaled units) with the current state."""
+            truth = jax.vmap(lambda x: problem.scale_reward(fns.expected_rewards(x)))(table_x)
+            return jnp.abs(table_predictions(state) - truth)
 
         def segment(carry: _Carry, bounds):
             lo_p, hi_p = bounds
@@ -320,8 +345,8 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
                         jnp.zeros((num_table, num_arms), jnp.int32))
         _, (sums, counts, comp, min_prob, diag, errs, tcounts) = jax.lax.scan(
             segment, carry0, (jnp.asarray(starts), jnp.asarray(ends)))
-        diag_out = (NeuralDiag(*[diag[:, i] for i in range(num_diag)], errs, tcounts)
-                    if config.diagnostics else None)
+        diag_out = (NeuralDiag(*[diag[:, i] for i in range(4)], errs, tcounts, diag[:, 4],
+                               diag[:, 5]) if config.diagnostics else None)
         return NeuralRunOutput(regret=sums[:, 0], regret_paper=sums[:, 1],
                                regret_rb=sums[:, 2], regret_rb_paper=sums[:, 3],
                                counts=counts, compensator=comp, min_prob=min_prob,
@@ -334,18 +359,21 @@ def make_run(config: NeuralRunConfig, problem: ContextualBandit, learner: base.L
 _JIT_CACHE: dict = {}
 
 
-def _batched(run: Callable) -> Callable:
-    """``jit(vmap(run))``, one per ``run`` object (one compilation per call shape)."""
-    fn = _JIT_CACHE.get(id(run))
+def _batched(run: Callable, traced: bool = False) -> Callable:
+    """``jit(vmap(run))`` (``traced``: ``jit(vmap(run, (0, None)))`` over (keys, params)), one
+    per ``run`` object (one compilation per call shape: a new value of the traced params
+    reuses it)."""
+    fn = _JIT_CACHE.get((id(run), traced))
     if fn is None or fn[0] is not run:
-        fn = (run, jax.jit(jax.vmap(run)))
-        _JIT_CACHE[id(run)] = fn
+        fn = (run, jax.jit(jax.vmap(run, (0, None)) if traced else jax.vmap(run)))
+        _JIT_CACHE[(id(run), traced)] = fn
     return fn[1]
 
 
 def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: int = 100, *,
               first_seed: int = 0, chunk_size: int | None = None, workers: int | None = None,
-              progress: Callable[[int], None] | None = None) -> NeuralRunOutput:
+              progress: Callable[[int], None] | None = None,
+              params=None) -> NeuralRunOutput:
     """Runs seeds ``first_seed … first_seed + num_seeds − 1`` of ``run`` (from
     :func:`make_run`); numpy outputs with a leading [S] axis.
 
@@ -355,6 +383,10 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
     parallelises inside. Two concurrent calls of a Neural-Linear program on the 2-core CPU
     hung with both threads waiting for their results, the intra-op thread pool apparently
     starved; the tabular executor's one-call-per-core rule is not used here).
+
+    ``params``: the problem's traced parameters (e.g. ``WheelParams(δ)``), passed to every
+    call as an argument of the compiled program, so other values reuse the compilation;
+    None: ``run(key)`` with the problem's own values.
     """
     if isinstance(num_seeds, bool) or not isinstance(num_seeds, (int, np.integer)) \
             or num_seeds < 1:
@@ -369,11 +401,20 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
     if chunk < 1:
         raise ValueError(f"--chunk-size must be >= 1, got {chunk_size!r}")
     root = jax.random.key(seed)
-    fn = _batched(run)
+    traced = params is not None
+    if traced:
+        params = jax.tree.map(lambda v: jnp.asarray(v, jnp.float32), params)
+    base_fn = _batched(run, traced)
+    fn = (lambda k: base_fn(k, params)) if traced else base_fn
     starts = list(range(0, num_seeds, chunk))
     workers = max(1, min(workers, len(starts)))
     if workers > 1:  # compile once here: worker threads must not trace
-        fn = fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype)).compile()
+        if traced:
+            compiled = base_fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype),
+                                     params).compile()
+            fn = lambda k: compiled(k, params)  # noqa: E731
+        else:
+            fn = base_fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype)).compile()
     result: list = [None] * len(starts)
     # every chunk's keys made here, in the calling thread: worker threads only run the
     # compiled program (no tracing or eager dispatch in threads)

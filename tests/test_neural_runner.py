@@ -123,3 +123,36 @@ def test_diagnostics_per_context_table():
     np.testing.assert_allclose(d.table_err, 0.0, atol=1e-6)
     np.testing.assert_allclose(d.err_chosen, 0.0, atol=1e-5)
     assert np.all(np.diff(d.inv_sqrt_chosen, axis=1) > 0)
+
+
+def test_traced_delta_one_compile_for_a_sweep_and_same_result_as_closed_over():
+    """run(key, WheelParams(δ)) equals the closed-over wheel(δ) run, and a δ sweep through
+    run_seeds(..., params=...) traces the run once (a counter in the bound problem counts
+    traces; the jitted function's cache holds one program)."""
+    model = networks.mlp_model(5, 2, (4,))
+    train = base.TrainConfig(horizon=T, fit_steps=2, batch_size=8, learning_rate=1e-2)
+    learner = registry.make("sern", model, train, {"alpha": 0.05})
+    cfg = nr.NeuralRunConfig(horizon=T, update_every=E, num_checkpoints=3)
+    traces = []
+    base_problem = cp.wheel(0.5)
+
+    def counting_bind(params):
+        traces.append(1)
+        return base_problem.bind(params)
+
+    run = nr.make_run(cfg, base_problem._replace(bind=counting_bind), learner, model)
+    outs = {d: nr.run_seeds(run, 1, 4, chunk_size=4, params=cp.WheelParams(d))
+            for d in (0.5, 0.7, 0.9)}
+    assert len(traces) == 1
+    assert nr._batched(run, traced=True)._cache_size() == 1
+    for d in (0.5, 0.9):  # the same numbers as the problem with δ closed over
+        ref = nr.run_seeds(nr.make_run(cfg, cp.wheel(d), learner, model), 1, 4, chunk_size=4)
+        np.testing.assert_array_equal(outs[d].counts, ref.counts)
+        for field in ("regret", "regret_paper", "regret_rb", "regret_rb_paper"):
+            np.testing.assert_allclose(getattr(outs[d], field), getattr(ref, field),
+                                       rtol=1e-6, atol=1e-3, err_msg=f"{field}, δ={d}")
+    assert not np.array_equal(outs[0.5].regret_rb, outs[0.9].regret_rb)  # δ does reach it
+    with pytest.raises(ValueError, match="diagnostics"):
+        diag_run = nr.make_run(nr.NeuralRunConfig(horizon=T, update_every=E, diagnostics=True),
+                               base_problem, learner, model)
+        diag_run(jax.random.key(0), cp.WheelParams(jnp.float32(0.7)))

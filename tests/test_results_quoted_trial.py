@@ -329,6 +329,34 @@ def test_forgetting_was_made_with_the_shipped_theta0_and_trial():
         "python -m experiments.core_set_forgetting")
 
 
+def _forgetting_table_rows(s):
+    """The two tables' rows docs/RESULTS.md prints for one forgetting summary."""
+    t = s["theta0"]
+    rows = [f"| θ0 | {t['d0_roc_auc']:.3f} | {t['d0_bce']:.3f} | {t['new_roc_auc']:.3f} |"]
+    label = {"none": "no core set", "random": "random core set", "dpp": "DPP core set"}
+    for kind, name in label.items():
+        k = s["per_kind"][kind]
+        cells = " | ".join(f"{k[m]['mean']:.3f} ± {k[m]['half']:.3f}"
+                           for m in ("d0_roc_auc", "d0_bce", "new_roc_auc"))
+        rows.append(f"| {name} | {cells} |")
+    diffs = {d["name"]: d for d in s["differences"]}
+
+    def cell(metric, pair, first):
+        d = diffs[f"{metric}: {pair}"]
+        p = d["pvalue_holm"]
+        ps = "< 0.001" if p < 0.001 else f"{p:.3f}" if p < 0.01 else f"{p:.2f}"
+        ps = ps.rstrip("0") if p >= 0.01 and ps.endswith("0") else ps
+        body = f"{d['mean']:+.3f} ± {d['half']:.3f}".replace("-", "−")
+        return f"{body} (Holm p {ps})" if first else f"{body} ({ps})"
+
+    for pair, name in (("dpp - none", "DPP − none"), ("random - none", "random − none"),
+                       ("dpp - random", "DPP − random")):
+        cells = [cell("d0_roc_auc", pair, pair == "dpp - none"), cell("d0_bce", pair, False),
+                 cell("new_roc_auc", pair, False)]
+        rows.append(f"| {name} | {' | '.join(cells)} |")
+    return rows
+
+
 def test_forgetting_numbers_quoted():
     from experiments.core_set_forgetting import summarise
 
@@ -344,29 +372,11 @@ def test_forgetting_numbers_quoted():
     assert (_pct(cfg["online_success_rate"]), _pct(cfg["d0_success_rate"]),
             cfg["d0_failures"]) == (77.3, 90.4, 74)
     t = s["theta0"]
-    row = f"| θ0 | {t['d0_roc_auc']:.3f} | {t['d0_bce']:.3f} | {t['new_roc_auc']:.3f} |"
-    assert row == "| θ0 | 0.990 | 0.053 | 0.491 |" and row in sec
-    label = {"none": "no core set", "random": "random core set", "dpp": "DPP core set"}
-    for kind, name in label.items():
-        k = s["per_kind"][kind]
-        cells = " | ".join(f"{k[m]['mean']:.3f} ± {k[m]['half']:.3f}"
-                           for m in ("d0_roc_auc", "d0_bce", "new_roc_auc"))
-        assert f"| {name} | {cells} |" in sec, kind
+    rows = _forgetting_table_rows(s)
+    assert rows[0] == "| θ0 | 0.990 | 0.053 | 0.491 |"
+    for row in rows:
+        assert row in sec, row
     diffs = {d["name"]: d for d in s["differences"]}
-
-    def cell(metric, pair, first):
-        d = diffs[f"{metric}: {pair}"]
-        p = d["pvalue_holm"]
-        ps = f"{p:.3f}" if p < 0.01 else f"{p:.2f}"
-        ps = ps.rstrip("0") if p >= 0.01 and ps.endswith("0") else ps
-        body = f"{d['mean']:+.3f} ± {d['half']:.3f}".replace("-", "−")
-        return f"{body} (Holm p {ps})" if first else f"{body} ({ps})"
-
-    for pair, name in (("dpp - none", "DPP − none"), ("random - none", "random − none"),
-                       ("dpp - random", "DPP − random")):
-        cells = [cell("d0_roc_auc", pair, pair == "dpp - none"), cell("d0_bce", pair, False),
-                 cell("new_roc_auc", pair, False)]
-        assert f"| {name} | {' | '.join(cells)} |" in sec, name
     resolved = sorted(n for n, d in diffs.items() if d["resolved"])
     assert resolved == ["d0_bce: dpp - none", "d0_roc_auc: dpp - none",
                         "d0_roc_auc: random - none", "new_roc_auc: dpp - none"]
@@ -526,3 +536,37 @@ def test_theory_6N_comparison_quoted():
               f"{now['error_n0']:.2f} and {now['error_n160']:.2f} now (slope "
               f"{now['slope_mean']:.2f} ± {now['slope_half']:.2f})").replace("-", "−")
     assert quoted in sec, quoted
+
+
+def test_forgetting_triangular_prism_quoted():
+    from experiments.core_set_forgetting import summarise
+    from sern_jax.grasp import artifacts
+
+    d = RESULTS / "forgetting_triangular_prism"
+    res = json.loads((d / "results.json").read_text())
+    cfg = json.loads((d / "config.json").read_text())
+    s = summarise(res)
+    _assert_same_summary(json.loads((d / "summary.json").read_text()),
+                         json.loads(json.dumps(s)))
+    assert cfg["theta0"] == artifacts.load_theta0().fingerprint
+    assert cfg["physics"]["scene"]["finger_force"] == 20.0
+    sec = _section(DOC, "The core set against forgetting")
+    prism = sec[sec.index("**The same on triangular_prism**"):]
+    assert (cfg["args"]["object"], round(cfg["seconds"]),
+            round(cfg["load_average_end"][0], 1)) == ("triangular_prism", 108, 10.4)
+    assert "load average 10.4 at the end, 108 s" in prism
+    assert (round(cfg["online_success_rate"] * 256), _pct(cfg["online_success_rate"])) == (7, 2.7)
+    rows = _forgetting_table_rows(s)
+    for row in rows:
+        assert row in prism, row
+    pk = s["per_kind"]
+    assert (round(pk["none"]["d0_bce"]["mean"], 2), round(pk["dpp"]["d0_bce"]["mean"], 2),
+            round(pk["random"]["d0_bce"]["mean"], 2)) == (2.17, 0.35, 0.23)
+    resolved = sorted(x["name"] for x in s["differences"] if x["resolved"])
+    assert "d0_bce: dpp - random" in resolved and "d0_roc_auc: dpp - random" not in resolved
+    assert "d0_bce: dpp - none" in resolved and "d0_bce: random - none" in resolved
+    # the core sets' positive fractions the text gives as a possible reason
+    theta0 = artifacts.load_theta0()
+    frac = {k: float(np.mean(np.asarray(artifacts.core_set_data(k, theta0).label)))
+            for k in ("dpp", "random")}
+    assert (round(100 * frac["random"]), round(100 * frac["dpp"])) == (92, 82)

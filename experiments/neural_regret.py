@@ -31,7 +31,8 @@ from sern_jax import io
 
 from . import regret as _tab
 
-__all__ = ["ALIASES", "NeuralRegretExperiment", "run_experiment", "summarise", "build_runs"]
+__all__ = ["ALIASES", "NeuralRegretExperiment", "run_experiment", "run_delta_sweep",
+           "summarise", "build_runs"]
 
 # Tabular policy names that mean the same learner here (one name, one thing).
 ALIASES = {"softmax": "sern", "epsilon_greedy": "egreedy"}
@@ -179,14 +180,30 @@ def build_runs(exp: NeuralRegretExperiment):
 
 
 def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress: bool = True,
-                   log=print) -> Path:
+                   log=print, sweep_cache: dict | None = None) -> Path:
     """Runs (or resumes) the experiment into ``out_dir``; returns the run directory.
 
     Everything is validated before anything is written or compiled; a run that fails before
     saving any seeds leaves no directory behind.
+
+    ``sweep_cache`` (a dict kept across calls): on the wheel, the runs are built once per
+    experiment-but-δ and δ is passed as a traced argument (``WheelParams``), so the calls of
+    a δ sweep share one compilation per policy (:func:`run_delta_sweep`).
     """
     run_dir = Path(out_dir)
-    runs, problem, cfg = build_runs(exp)
+    params = None
+    if sweep_cache is not None and exp.problem == "wheel":
+        from sern_jax import contextual_problems as cp
+
+        key = dataclasses.replace(exp, delta=0.5, chunk_size=1).fingerprint()
+        if key not in sweep_cache:
+            sweep_cache[key] = build_runs(exp)
+        _check(exp)
+        runs, _, cfg = sweep_cache[key]
+        problem = cp.make_problem("wheel", delta=exp.delta, num_arms=exp.num_arms)
+        params = problem.params
+    else:
+        runs, problem, cfg = build_runs(exp)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"--out {run_dir} exists and is not a directory")
     cfg_path = run_dir / "config.json"
@@ -209,7 +226,7 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
         with io.run_lock(run_dir):
-            return _run(exp, runs, problem, cfg, run_dir, progress, log)
+            return _run(exp, runs, problem, cfg, run_dir, progress, log, params)
     except Exception:
         chunk_dir = run_dir / "chunks"
         if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
@@ -217,7 +234,8 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
         raise
 
 
-def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print) -> Path:
+def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print,
+         params=None) -> Path:
     from sern_jax import neural_runner as nr
 
     (run_dir / "figures").mkdir(exist_ok=True)
@@ -238,7 +256,8 @@ def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print) -> P
                 bar.update(b - a)
                 continue
             start_time = time.perf_counter()
-            out = nr.run_seeds(run, exp.seed, b - a, first_seed=a, chunk_size=per_call)
+            out = nr.run_seeds(run, exp.seed, b - a, first_seed=a, chunk_size=per_call,
+                               params=params)
             io.save_npz(chunk_dir / _tab._chunk_name(policy, a, b),
                         wall_s=np.float64(time.perf_counter() - start_time),
                         **{f: getattr(out, f) for f in FIELDS})
@@ -260,6 +279,26 @@ def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print) -> P
     io.save_json(run_dir / "summary.json", summary)
     _write_report(run_dir, exp, problem, summary, meta)
     return run_dir
+
+
+def run_delta_sweep(exp: NeuralRegretExperiment, deltas, out_root: str | Path, *,
+                    progress: bool = True, log=print) -> list[Path]:
+    """The wheel experiment at every δ of ``deltas``, one run directory each
+    (``out_root/d<δ>``), sharing one compilation per policy (δ is a traced argument). Every
+    δ is validated before anything runs; each directory resumes on its own."""
+    from sern_jax import contextual_problems as cp
+
+    if exp.problem != "wheel":
+        raise ValueError("--deltas applies to --problem wheel")
+    deltas = [float(d) for d in deltas]
+    if not deltas or len(set(deltas)) != len(deltas):
+        raise ValueError(f"--deltas must list distinct values, got {deltas}")
+    for d in deltas:
+        cp.make_problem("wheel", delta=d, num_arms=exp.num_arms)  # one line naming --delta
+        _check(dataclasses.replace(exp, delta=d))
+    cache: dict = {}
+    return [run_experiment(dataclasses.replace(exp, delta=d), Path(out_root) / f"d{d:g}",
+                           progress=progress, log=log, sweep_cache=cache) for d in deltas]
 
 
 def _ratio_interval(num: np.ndarray, den: np.ndarray, num_boot: int = 2000,

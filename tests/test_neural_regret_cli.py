@@ -105,3 +105,49 @@ def test_neural_linear_options_enter_the_fingerprint_only_when_set():
     assert legacy.fingerprint() == Exp(nl_sigma2="arm", nl_prior_mean="network").fingerprint()
     assert legacy.fingerprint() != Exp(nl_sigma2="pooled").fingerprint()
     assert legacy.fingerprint() != Exp(nl_prior_mean="zero").fingerprint()
+
+
+def test_delta_sweep_compiles_once_and_matches_single_runs(run_dir, tmp_path):
+    """--deltas 0.5,0.7: one run directory per δ; the second δ reuses the first one's
+    compilation (one program in each policy's jit cache), and d0.5 holds the same numbers as
+    the single --delta 0.5 run."""
+    import dataclasses
+
+    from experiments import neural_regret as nreg
+    from sern_jax import neural_runner as nr
+
+    out = tmp_path / "sweep"
+    argv = [a for a in ARGS]
+    argv[argv.index("--delta"):argv.index("--delta") + 2] = []
+    assert cli.main(argv + ["--deltas", "0.5,0.7", "--out", str(out)]) == 0
+    a = io.load_npz(run_dir / "results.npz")
+    b = io.load_npz(out / "d0.5" / "results.npz")
+    np.testing.assert_array_equal(a["sern__counts"], b["sern__counts"])
+    np.testing.assert_allclose(a["sern__regret_rb"], b["sern__regret_rb"], rtol=1e-6, atol=1e-3)
+    c = io.load_npz(out / "d0.7" / "results.npz")
+    assert not np.array_equal(b["uniform__regret_rb"], c["uniform__regret_rb"])
+    assert json.loads((out / "d0.7" / "config.json").read_text())["experiment"]["delta"] == 0.7
+    # in-process: a sweep of two δ leaves one compiled program per policy
+    exp = nreg.NeuralRegretExperiment(policies=("sern",), horizon=40, update_every=20,
+                                      num_seeds=2, chunk_size=2, hidden=(4,), fit_steps=2,
+                                      batch_size=8, num_checkpoints=2)
+    cache: dict = {}
+    for d in (0.6, 0.8):
+        nreg.run_experiment(dataclasses.replace(exp, delta=d), tmp_path / f"lib{d}",
+                            progress=False, sweep_cache=cache)
+    (runs, _, _), = cache.values()
+    assert nr._batched(runs[0][1], traced=True)._cache_size() == 1
+
+
+@pytest.mark.parametrize("extra, flag", [
+    (["--deltas", "0.5,1.5"], "--delta"),
+    (["--deltas", "0.5,x"], "--deltas"),
+    (["--deltas", "0.5,0.5"], "--deltas"),
+    (["--deltas", "0.5", "--problem", "linear"], "--deltas"),
+])
+def test_bad_deltas_are_one_line_before_anything_runs(extra, flag, tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert cli.main(ARGS + extra + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert flag in err and "\n" not in err, err
+    assert not out.exists()

@@ -70,6 +70,10 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="neural: rows per minibatch step")
     p.add_argument("--learning-rate", type=float, default=_NEURAL.learning_rate,
                    help="neural: Adam step size")
+    p.add_argument("--deltas", default=None,
+                   help="neural wheel: a comma list of δ, one run directory each under --out "
+                        "(d<δ>), one compilation for all (δ is a traced argument); replaces "
+                        "--delta")
     p.add_argument("--nl-prior-mean", default=None,
                    help=f"neural: neural_lints/neural_linucb centre their regression on the "
                         f"network's r̂ (network) or on 0 (zero) (default {_NEURAL.nl_prior_mean})")
@@ -173,13 +177,25 @@ def _run_neural(args, make_figures: Callable | None) -> int:
         chunk_size=_or(args.chunk_size, nd.chunk_size),
         nl_prior_mean=_or(args.nl_prior_mean, nd.nl_prior_mean),
         nl_sigma2=_or(args.nl_sigma2, nd.nl_sigma2))
-    out = Path(args.out) if args.out else Path("runs") / f"regret-neural-{exp.fingerprint()}"
-    run_dir = mod.run_experiment(exp, out, progress=not args.no_progress)
-    print((run_dir / "report.md").read_text())
-    if not args.no_figures and make_figures is not None:
-        for path in make_figures(run_dir):
-            print(f"wrote {path}")
-    print(f"run directory: {run_dir}")
+    if args.deltas is not None:
+        try:
+            deltas = [float(v) for v in args.deltas.split(",") if v.strip()]
+        except ValueError:
+            raise ValueError(f"--deltas must be a comma list of numbers, got "
+                             f"{args.deltas!r}") from None
+        out = (Path(args.out) if args.out
+               else Path("runs") / f"regret-neural-sweep-{exp.fingerprint()}")
+        run_dirs = mod.run_delta_sweep(exp, deltas, out, progress=not args.no_progress)
+    else:
+        out = (Path(args.out) if args.out
+               else Path("runs") / f"regret-neural-{exp.fingerprint()}")
+        run_dirs = [mod.run_experiment(exp, out, progress=not args.no_progress)]
+    for run_dir in run_dirs:
+        print((run_dir / "report.md").read_text())
+        if not args.no_figures and make_figures is not None:
+            for path in make_figures(run_dir):
+                print(f"wrote {path}")
+        print(f"run directory: {run_dir}")
     return 0
 
 
@@ -196,7 +212,7 @@ def run(args, *, defaults: Any, run_experiment: Callable,
     if args.problem != "bernoulli":
         raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
                          f"estimators run --problem bernoulli)")
-    for flag in ("nl_prior_mean", "nl_sigma2"):
+    for flag in ("nl_prior_mean", "nl_sigma2", "deltas"):
         if getattr(args, flag) is not None:
             raise ValueError(f"--{flag.replace('_', '-')} applies to --estimator neural, not "
                              f"the tabular estimators")

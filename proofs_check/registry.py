@@ -34,10 +34,12 @@ NAMES = (
     "alg1_argmax_literal",
     # the paper's experimental setting
     "exp_fixed_alpha",
-    # Theorem 1 and Assumption 3 on a real neural estimator (issue 19)
+    # Theorems 1, 3, 4, Assumption 3 and Algorithm 1 on a real neural estimator (issue 19)
     "n1_neural_floor",
     "a3_neural_error",
+    "t3_neural_inequality",
     "t4_neural_bound",
+    "alg1_neural_argmax",
 )
 
 

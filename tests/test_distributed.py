@@ -286,14 +286,18 @@ def test_dataset_command_takes_the_ray_flags(local_ray, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ray-cpus" in err
     assert not out.exists()
-    # the command's own --ray path against the library's single-process shard
-    assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
-                 "--no-progress", "--out", str(out)]) == 0
-    assert "Ray: 1 shards" in capsys.readouterr().out
-    config = dataset.DatasetConfig(num_objects=1, poses_per_object=1)
+    # the command's own --ray path against the library's single-process shards; one object
+    # per shard (--objects-per-shard 1) gives the default layout's arrays object by object
+    assert main(["grasp", "dataset", "--objects", "2", "--poses", "1", "--ray",
+                 "--objects-per-shard", "1", "--no-progress", "--out", str(out)]) == 0
+    assert "Ray: 2 shards" in capsys.readouterr().out
+    config = dataset.DatasetConfig(num_objects=2, poses_per_object=1)
     dataset.generate(config, tmp_path / "one", progress=False, log=lambda s: None)
-    _assert_same_arrays(_arrays(tmp_path / "one" / "shard_00000.npz"),
-                        _arrays(out / "shard_00000.npz"))
+    both = _arrays(tmp_path / "one" / "shard_00000.npz")  # objects 0 and 1 in one shard
+    for i in range(2):
+        part = _arrays(out / f"shard_{i:05d}.npz")
+        rows = both["object_index"] == i
+        _assert_same_arrays({k: v[rows] for k, v in both.items()}, part)
 
 
 def _fake_cell(cell: str, out, seeds: int, rounds: int, objects: int) -> None:

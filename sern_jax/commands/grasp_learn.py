@@ -85,6 +85,10 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=_positive_int, default=1,
                    help="trials per grasp (1 = one Bernoulli label; more = frequencies)")
     p.add_argument("--backend", choices=("native", "mjx"), default="native")
+    p.add_argument("--objects-per-shard", type=_positive_int, default=None, metavar="N",
+                   help="objects per shard file, the unit of resume and of --ray tasks "
+                        "(default 10; 1 keeps many Ray workers evenly busy: docs/CLUSTER.md); "
+                        "the shards of one object hold the same arrays whatever N")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/d0", help="dataset directory")
     p.add_argument("--no-progress", action="store_true")
@@ -104,9 +108,12 @@ def _run_dataset(args) -> int:
     from sern_jax.grasp import budget, dataset
 
     try:
+        shard = getattr(args, "objects_per_shard", None)
         config = dataset.DatasetConfig(seed=args.seed, num_objects=args.objects,
                                        poses_per_object=args.poses,
-                                       trials_per_grasp=args.trials, backend=args.backend)
+                                       trials_per_grasp=args.trials, backend=args.backend,
+                                       **({} if shard is None else
+                                          {"objects_per_shard": shard}))
     except ValueError as e:
         raise ValueError(_dataset_flags(str(e))) from None
     _check_size(budget.dataset(objects=args.objects, poses=args.poses, trials=args.trials,
@@ -119,7 +126,8 @@ def _run_dataset(args) -> int:
 
 
 _DATASET_FLAGS = {"num_objects": "--objects", "poses_per_object": "--poses",
-                  "trials_per_grasp": "--trials", "seed": "--seed", "backend": "--backend"}
+                  "trials_per_grasp": "--trials", "seed": "--seed", "backend": "--backend",
+                  "objects_per_shard": "--objects-per-shard"}
 
 
 def _dataset_flags(message: str) -> str:

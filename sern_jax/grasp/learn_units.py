@@ -41,11 +41,10 @@ from pathlib import Path
 import numpy as np
 
 from sern_jax import io
-from sern_jax.grasp import artifacts
+from sern_jax.grasp import artifacts, runner
 from sern_jax.grasp import objects as objects_lib
-from sern_jax.grasp import runner
 
-__all__ = ["UNITS_DIR", "unit_name", "unit_dir", "run_unit", "run"]
+__all__ = ["UNITS_DIR", "run", "run_unit", "unit_dir", "unit_name"]
 
 UNITS_DIR = "units"  # <run dir>/units/<unit>/: one object's run directory
 _UNIT_JSON = "unit.json"

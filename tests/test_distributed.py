@@ -408,13 +408,38 @@ def _unit_fails_for_box(config, spec, out_dir, theta0) -> None:
     learn_units.run_unit(config, spec, out_dir, theta0)
 
 
+def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
+    """A learn unit whose worker process is killed (SIGKILL) right after the box's round-1
+    checkpoint, on the first attempt; Ray's retry resumes the unit from that checkpoint."""
+    from sern_jax.grasp import learn_units, runner
+
+    marker = Path(out_dir).parent.parent / f"{spec.name}.killed"
+    real = runner._save
+
+    def save(path, fingerprint, results, rewards, next_round):
+        real(path, fingerprint, results, rewards, next_round)
+        if spec.name == "box" and next_round == 2 and not marker.exists():
+            marker.write_text("killed once after round 1")
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    runner._save = save
+    try:
+        learn_units.run_unit(config, spec, out_dir, theta0)
+    finally:
+        runner._save = real
+
+
 def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
         local_ray, tmp_path, capsys, monkeypatch):
     from sern_jax.grasp import learn_units
 
     one, par = tmp_path / "one", tmp_path / "ray"
     assert main(LEARN + ["--out", str(one)]) == 0
+    # the box's worker is killed mid-unit (after round 1) once: retried, same results
+    monkeypatch.setattr(learn_units, "run_unit", _unit_killed_after_round_1)
     assert main(LEARN + ["--ray", "--out", str(par)]) == 0
+    monkeypatch.undo()
+    assert (par / "box.killed").exists()
     assert "Ray: 2 objects" in capsys.readouterr().out
     single = _learn_arrays(one)
     _assert_same_arrays(single, _learn_arrays(par))

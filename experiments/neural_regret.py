@@ -66,7 +66,7 @@ class NeuralRegretExperiment:
     num_checkpoints: int = 16
     chunk_size: int = 100
     nl_prior_mean: str = "network"  # neural_lints/neural_linucb: --nl-prior-mean
-    nl_sigma2: str = "arm"  # neural_lints/neural_linucb: --nl-sigma2 (arm | pooled)
+    nl_sigma2: str = "pooled"  # neural_lints/neural_linucb: --nl-sigma2 (pooled | arm)
 
     def fingerprint(self) -> str:
         """Hash of the fields that change results (not the chunk size). The Neural-Linear

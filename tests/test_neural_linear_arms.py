@@ -47,7 +47,7 @@ def test_learner_refit_over_its_arm_rows_equals_the_closed_form(name, chunk, mon
     horizon, e = 30, 6
     model = networks.mlp_model(3, 2, (5,))
     train = base.TrainConfig(horizon=horizon, fit_steps=2, batch_size=4, learning_rate=0.05)
-    lrn = registry.make(name, model, train)
+    lrn = registry.make(name, model, train, registry.make_config(name, {"nl_sigma2": "arm"}))
     core = base.Data((networks.candidate_inputs(jnp.asarray([0.2, -0.1]), 3),),
                      jnp.asarray([1.0, 0.0, 0.5]), jnp.ones(3))  # a core set C too
     state = lrn.init(jax.random.key(0), model.init(jax.random.key(1)), core)

@@ -1,18 +1,33 @@
-"""The numbers docs/NEURAL.md quotes for the per-arm Neural-Linear Thompson learner on the
-wheel bandit are recomputed from the committed per-seed files
-(experiments/results/wheel_neural_lints/d<δ>/results.npz: regret_rb [S, G] per policy, with
-the command in config.json / metadata.json)."""
+"""The numbers docs/NEURAL.md quotes for the Neural-Linear Thompson learner on the wheel
+bandit are recomputed from the committed per-seed files
+(experiments/results/wheel_neural_lints*/d<δ>/results.npz: regret_rb [S, G] per policy, with
+the command in config.json / metadata.json): one row per variant of the learner (σ² per arm
+or pooled × prior mean network or zero) and the paired differences between variants."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sern_jax import io
+from sern_jax import io, stats
 
 ROOT = Path(__file__).resolve().parents[1]
-RUNS = ROOT / "experiments" / "results" / "wheel_neural_lints"
+RESULTS = ROOT / "experiments" / "results"
 DELTAS = ("0.5", "0.7", "0.9", "0.95", "0.99")
+# variant: (folder, label in docs/NEURAL.md, nl_sigma2, nl_prior_mean)
+VARIANTS = {
+    "arm_network": ("wheel_neural_lints", "neural_lints (per-arm, 2026-11-24)", None, None),
+    "arm_zero": ("wheel_neural_lints_arm_zero", "neural_lints, σ² per arm, prior mean zero",
+                 "arm", "zero"),
+    "pooled_zero": ("wheel_neural_lints_pooled_zero",
+                    "neural_lints, σ² pooled, prior mean zero", "pooled", "zero"),
+    "pooled_network": ("wheel_neural_lints_pooled_network",
+                       "neural_lints, σ² pooled, prior mean network (default)", "pooled",
+                       "network"),
+}
+# the paired comparisons quoted: (a, b) means a − b
+PAIRS = (("pooled_network", "arm_network"), ("arm_zero", "arm_network"),
+         ("pooled_zero", "pooled_network"))
 
 
 def _ratio_interval(num, den, num_boot=2000, seed=0):
@@ -23,21 +38,77 @@ def _ratio_interval(num, den, num_boot=2000, seed=0):
     return num.mean() / den.mean(), np.percentile(boots, 2.5), np.percentile(boots, 97.5)
 
 
-def test_quoted_row_and_uniform_regret_match_the_per_seed_files():
-    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())  # reflow-proof
-    cells, uniform = [], []
+def _regret(variant, delta, policy="neural_lints"):
+    res = io.load_npz(RESULTS / VARIANTS[variant][0] / f"d{delta}" / "results.npz")
+    return res[f"{policy}__regret_rb"][:, -1].astype(np.float64)
+
+
+def row(variant):
+    cells = []
     for d in DELTAS:
-        res = io.load_npz(RUNS / f"d{d}" / "results.npz")
-        cfg = io.load_json(RUNS / f"d{d}" / "config.json")["experiment"]
-        assert float(cfg["delta"]) == float(d) and cfg["num_seeds"] == 20
-        assert cfg["horizon"] == 1000
-        num = res["neural_lints__regret_rb"][:, -1].astype(np.float64)
-        den = res["uniform__regret_rb"][:, -1].astype(np.float64)
-        r, lo, hi = _ratio_interval(num, den)
+        r, lo, hi = _ratio_interval(_regret(variant, d), _regret(variant, d, "uniform"))
         cells.append(f"{r:.3f} [{lo:.3f}, {hi:.3f}]")
-        uniform.append(f"{den.mean():,.0f}")
-        summary = io.load_json(RUNS / f"d{d}" / "summary.json")
-        assert summary["normalised_by_uniform"]["neural_lints"]["ratio"] == pytest.approx(r)
-    row = "| neural_lints (per-arm, 2026-11-24) | " + " | ".join(cells) + " |"
-    assert row in doc, row
+    return f"| {VARIANTS[variant][1]} | " + " | ".join(cells) + " |"
+
+
+def pair_row(a, b):
+    """a − b per δ as a fraction of Uniform's R_T: Student-t 95% over seeds, Holm over δ."""
+    diffs = stats.paired_differences([_regret(a, d) for d in DELTAS],
+                                     [_regret(b, d) for d in DELTAS], names=DELTAS)
+    cells = []
+    for d, r in zip(DELTAS, diffs):
+        u = _regret(a, d, "uniform").mean()
+        cells.append(f"{r.mean / u:+.3f} [{r.lower / u:+.3f}, {r.upper / u:+.3f}] "
+                     f"{'(resolved)' if r.resolved else '(not resolved)'}")
+    return f"| {a} − {b} | " + " | ".join(cells) + " |"
+
+
+def test_configs_are_the_quoted_command():
+    for variant, (folder, _, sigma2, prior) in VARIANTS.items():
+        for d in DELTAS:
+            cfg = io.load_json(RESULTS / folder / f"d{d}" / "config.json")["experiment"]
+            assert float(cfg["delta"]) == float(d) and cfg["num_seeds"] == 20
+            assert cfg["horizon"] == 1000 and cfg["seed"] == 0 and cfg["hidden"] == [50]
+            assert cfg["update_every"] == 50 and cfg["fit_steps"] == 20
+            assert cfg.get("nl_sigma2") == sigma2 and cfg.get("nl_prior_mean") == prior, variant
+            # Uniform's seeds are the same in every variant (common random numbers)
+            np.testing.assert_array_equal(_regret(variant, d, "uniform"),
+                                          _regret("arm_network", d, "uniform"))
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_quoted_rows_match_the_per_seed_files(variant):
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())  # reflow-proof
+    assert row(variant) in doc, row(variant)
+    for d in DELTAS:
+        summary = io.load_json(RESULTS / VARIANTS[variant][0] / f"d{d}" / "summary.json")
+        r = summary["normalised_by_uniform"]["neural_lints"]["ratio"]
+        assert r == pytest.approx(_regret(variant, d).mean() / _regret(variant, d,
+                                                                       "uniform").mean())
+
+
+def test_quoted_paired_differences_and_uniform_regret():
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    for a, b in PAIRS:
+        assert pair_row(a, b) in doc, pair_row(a, b)
+    uniform = [f"{_regret('arm_network', d, 'uniform').mean():,.0f}" for d in DELTAS]
     assert f"Uniform's R_T on these seeds: {', '.join(uniform)}" in doc
+
+
+def test_quoted_prior_dominance_arithmetic():
+    """The σ² lower bounds quoted beside the per-arm/pooled comparison: arm 4's mean pull
+    count at δ = 0.5 (σ² per arm, prior mean network), b0/(a0 + n/2 − 1) and its sd, and the
+    pooled bound over the 1,000 rows (a0 = b0 = 6, the learner's defaults)."""
+    from sern_jax.learners import neural_linear as nl
+
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    cfg = nl.NeuralLinTSConfig()
+    a0, b0 = cfg.a0, cfg.b0
+    counts = io.load_npz(RESULTS / "wheel_neural_lints" / "d0.5" / "results.npz")[
+        "neural_lints__counts"][:, -1]
+    n4 = counts[:, 4].mean()
+    bound = b0 / (a0 + n4 / 2 - 1)
+    for q in (f"an arm with {n4:.1f} rows", f"keeps E σ² ≥ {bound:.2f}",
+              f"sd ≥ {np.sqrt(bound):.2f} on rewards",
+              f"over 1,000 rows has E σ² ≥ {b0 / (a0 + 1000 / 2 - 1):.3f}"):
+        assert q in doc, q

@@ -78,8 +78,8 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help=f"neural: neural_lints/neural_linucb centre their regression on the "
                         f"network's r̂ (network) or on 0 (zero) (default {_NEURAL.nl_prior_mean})")
     p.add_argument("--nl-sigma2", default=None,
-                   help=f"neural: neural_lints/neural_linucb keep one noise variance σ² per "
-                        f"arm (arm) or one shared by the arms (pooled) (default "
+                   help=f"neural: neural_lints/neural_linucb share one noise variance σ² "
+                        f"across arms (pooled) or keep one per arm (arm) (default "
                         f"{_NEURAL.nl_sigma2})")
     p.add_argument("--context-dim", type=int, default=_NEURAL.context_dim,
                    help="neural finite/linear problems: context feature dimension d")

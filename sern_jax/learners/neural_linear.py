@@ -46,13 +46,17 @@ arms as they arrive, so a refit sums each arm's own rows only, in chunks
 (:func:`_refit_arms`): ~N(d + 1)² work for N rows, not K²·N(d + 1)². The grasp network
 returns plain features (one shared β, as above).
 
-Noise variance (``--nl-sigma2``). ``arm`` (default): each arm's own σ² ~ IG(a_g, b_g), as
-the Showdown's ``NeuralLinearPosteriorSampling`` keeps ``a[i]``, ``b[i]`` per action
-(tensorflow/models research/deep_contextual_bandits). ``pooled``: one σ² for all arms, the
-exact closed form of one regression on the block features onehot(arm) ⊗ φ with β_g | σ²
+Noise variance (``--nl-sigma2``). ``pooled`` (default): one σ² for all arms, the exact
+closed form of one regression on the block features onehot(arm) ⊗ φ with β_g | σ²
 independent (Λ is block diagonal, so the arms' μ_g, Λ_g are unchanged and only (a, b) pool
-every arm's rows); a Thompson draw then takes one σ² for all arms. With a shared β (plain
-features) there is one σ² either way.
+every arm's rows); a Thompson draw then takes one σ² for all arms. ``arm``: each arm's own
+σ² ~ IG(a_g, b_g), as the Showdown's ``NeuralLinearPosteriorSampling`` keeps ``a[i]``,
+``b[i]`` per action (tensorflow/models research/deep_contextual_bandits). The default is
+pooled on evidence: on the wheel (20 seeds × T = 1000 per δ, docs/NEURAL.md) per-arm σ² cost
+0.044–0.089 of Uniform's regret at every δ (resolved after Holm at δ ≤ 0.95). With the
+Showdown's IG(6, 6) prior on rewards scaled to [0, 1], an arm's σ² stays near the prior
+(mean 1.2) until it has many rows, where one pooled σ² has every arm's rows. With a shared β
+(plain features) there is one σ² either way.
 
 Cost per decision. Each refit also caches ``U = L⁻ᵀ`` (``Posterior.chol_inv_t``), so a
 Thompson draw ``β = μ + σ U z`` and UCB's ``φᵀΛ⁻¹φ = |Uᵀφ|²`` are matrix products, with no
@@ -120,10 +124,10 @@ def _prior_mean_field():
 
 
 def _sigma2_field():
-    return dataclasses.field(default="arm", metadata={
+    return dataclasses.field(default="pooled", metadata={
         "flag": "--nl-sigma2", "help": "neural_lints/neural_linucb with one posterior per arm: "
-        "each arm its own noise variance σ² (arm: the Showdown's NeuralLinear) or one σ² "
-        "shared by the arms (pooled); no effect with a shared β"})
+        "one noise variance σ² shared by the arms (pooled) or each arm its own (arm: the "
+        "Showdown's NeuralLinear); no effect with a shared β"})
 
 
 def _check_sigma2(value) -> None:

@@ -471,6 +471,11 @@ def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
     assert (par / "units" / "object_triangular_prism" /
             "checkpoint.npz").stat().st_mtime_ns == kept
     _assert_same_arrays(single, _learn_arrays(par))
+    # a finished run: nothing runs (the units are not even looked at), same files
+    shutil.rmtree(par / "units")
+    assert main(LEARN + ["--ray", "--out", str(par)]) == 0
+    assert "Ray:" not in capsys.readouterr().out and not (par / "units").exists()
+    _assert_same_arrays(single, _learn_arrays(par))
 
     # a run left part-way without --ray (its checkpoint after round 1) continues on Ray:
     # split into units at round 2, each replays round 1 and runs round 2

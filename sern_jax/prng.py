@@ -33,7 +33,7 @@ import numpy as np
 
 from sern_jax.types import Array, Key
 
-__all__ = ["threefry2x32", "open_unit", "beta_try", "sample_beta"]
+__all__ = ["threefry2x32", "open_unit", "hold", "hold_bits", "beta_try", "sample_beta"]
 
 _ROT = ((13, 15, 26, 6), (17, 29, 16, 24))
 _LOG4 = 1.3862944  # log 4 (Cheng's BB constants)
@@ -75,6 +75,29 @@ def open_unit(bits: Array, dtype) -> Array:
     return (m + 0.5) * jnp.float32(2.0**-23)
 
 
+def hold(u: Array) -> Array:
+    """``u`` itself (u > 0), computed once.
+
+    ``sqrt(4u·u)/2`` equals ``u`` exactly for every positive float whose square neither
+    overflows nor underflows (4 and 1/2 only move the exponent; checked for all 2^23 float32
+    values of :func:`open_unit`). XLA counts ``sqrt`` as expensive, so it computes the hash
+    behind ``u`` once and stores it, instead of copying the integer-only threefry into every
+    fusion that reads ``u``, as XLA:CPU did (~6 hashes per lane and try in
+    :mod:`sern_jax.fast_thompson`). Plain ``sqrt(u·u)`` is simplified to ``|u|`` by XLA.
+    """
+    return jnp.sqrt((4.0 * u) * u) * 0.5
+
+
+def hold_bits(x: Array) -> Array:
+    """uint32 ``x`` itself, computed once (:func:`hold` on its two 16-bit halves, exact: the
+    halves are integers below 2^16, checked for all of them). For key words computed per seed
+    and read by every lane: XLA would otherwise recompute the hash in each lane."""
+    one = jnp.float32(1.0)
+    hi = hold((x >> np.uint32(16)).astype(jnp.float32) + one) - one
+    lo = hold((x & np.uint32(0xFFFF)).astype(jnp.float32) + one) - one
+    return (hi.astype(jnp.uint32) << np.uint32(16)) | lo.astype(jnp.uint32)
+
+
 def beta_try(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
              lane: Array) -> tuple[Array, Array]:
     """One try of the exact Beta(a, b) sampler on each lane (elementwise, broadcasting).
@@ -91,7 +114,7 @@ def beta_try(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
     """
     dtype = a.dtype
     w1, w2 = threefry2x32(k1, k2, try_index, lane)
-    u1, u2 = open_unit(w1, dtype), open_unit(w2, dtype)
+    u1, u2 = hold(open_unit(w1, dtype)), hold(open_unit(w2, dtype))
     lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
     # ---- min(a, b) = 1: inversion with u1
     log_u = jnp.log(u1)

@@ -62,6 +62,35 @@ def test_fast_thompson_equals_the_general_runner():
     assert fast.counts[:, -1].sum(-1).tolist() == [300] * 40
 
 
+@pytest.mark.parametrize("lookahead,pulled_tries", [(1, 0), (4, 3)])
+def test_fast_thompson_lookahead_keeps_the_draws(lookahead, pulled_tries):
+    """Drawing ahead (any depth, any number of immediate tries for the pulled lane) changes
+    only the loop, not the draws: the same arms as the general runner, seed by seed."""
+    general = executor.run_seeds(CFG, PARAMS, seed=2, num_seeds=16, runner="general")
+    fn = jax.jit(fast_thompson.make_batched(CFG, lookahead=lookahead,
+                                            pulled_tries=pulled_tries, with_steps=True))
+    out, steps = fn(sim.seed_keys(jax.random.key(2), 16), PARAMS)
+    np.testing.assert_array_equal(np.asarray(out.counts), general.counts)
+    # every round costs at least one loop step, and rejections cost a few more
+    assert CFG.horizon <= int(np.max(steps)) < 4 * CFG.horizon
+    with pytest.raises(ValueError, match="lookahead"):
+        fast_thompson.make_batched(CFG, lookahead=3)
+
+
+def test_hold_is_the_identity_on_every_uniform_and_key_word():
+    """prng.hold / hold_bits only stop XLA from recomputing a hash in every fusion; they must
+    return their argument bit for bit: all 2^23 float32 uniforms of open_unit, 0 and 1, and
+    key words with every 16-bit half."""
+    m = np.arange(2**23, dtype=np.float32)
+    u = np.concatenate([(m + np.float32(0.5)) * np.float32(2.0**-23), [0.0, 1.0]]).astype(
+        np.float32)
+    np.testing.assert_array_equal(np.asarray(jax.jit(prng.hold)(jnp.asarray(u))), u)
+    half = np.arange(2**16, dtype=np.uint32)
+    words = np.concatenate([half, half << np.uint32(16), (half << np.uint32(16)) | half[::-1]])
+    np.testing.assert_array_equal(np.asarray(jax.jit(prng.hold_bits)(jnp.asarray(words))),
+                                  words)
+
+
 def test_fast_thompson_refuses_what_it_does_not_reproduce():
     for bad in (dataclasses.replace(CFG, policy="softmax"),
                 dataclasses.replace(CFG, diagnostics=True),

@@ -1,7 +1,7 @@
 """Scale-out on Ray: units of work as Ray tasks, each writing its files into the run directory.
 
 The run directories already resume by unit of work: a regret seed chunk, a D0 shard, a grid
-cell. This module runs such units as Ray tasks instead of in the calling process, so that one
+cell, a grasp-learning object (all its learner copies: ``sern_jax.grasp.learn_units``). This module runs such units as Ray tasks instead of in the calling process, so that one
 command spreads over every core of a machine or over a cluster (issue 20):
 
 * a :class:`Unit` is ``fn(*args)``: a module-level function that computes one unit and

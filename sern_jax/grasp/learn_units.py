@@ -133,7 +133,8 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
 
     Raises:
       sern_jax.distributed.UnitFailedError: a unit failed for good (one line); the run
-        directory's checkpoint then holds the rounds every unit finished.
+        directory's checkpoint then holds the rounds every unit finished (when every unit
+        has finished round 0; the units' own checkpoints are kept either way).
       ValueError: the run directory, or a unit's, holds another run.
     """
     from sern_jax import distributed
@@ -181,8 +182,9 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
             results, rewards, next_round = _join(saved)
             if main is None or next_round > int(main["next_round"]):
                 runner._save(ckpt, fingerprint, results, rewards, next_round)
-    if next_round <= num_r:
-        raise RuntimeError(f"units stopped at round {next_round} of {num_r}")
+    if next_round <= num_r:  # a unit returned unfinished: a bug, never a partial table
+        raise RuntimeError(f"--ray: the units stopped before round {num_r} finished (the "
+                           f"slowest at round {next_round - 1}); rerun to resume")
     timings: dict[str, float] = {}
     counts = {"requested": 0, "simulated": 0}
     for o in todo:

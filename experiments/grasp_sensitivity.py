@@ -171,9 +171,10 @@ def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
     """Runs (or resumes) one cell of today's grid; writes ``out/<cell>.json``
     (``experiments.grasp_learning``'s per-seed format, with the world) and returns it.
     A cell whose file already holds every round is not rerun."""
-    from . import grasp_learning
     from sern_jax import io
     from sern_jax.grasp import artifacts, objects, runner
+
+    from . import grasp_learning
 
     if cell not in CELLS:
         raise ValueError(f"unknown cell {cell!r}; choose from {', '.join(CELLS)}")
@@ -244,8 +245,9 @@ def summarise(out: str | Path, level: float = 0.95) -> dict:
 
 
 def _summarise_today(out: Path, level: float = 0.95) -> dict:
-    from . import grasp_learning
     from sern_jax import io
+
+    from . import grasp_learning
 
     docs = grasp_learning.load_results(out)
     unknown = sorted(set(docs) - set(CELLS))
@@ -356,7 +358,7 @@ def _summarise_6N(out: Path, level: float = 0.95) -> dict:
     was summarised when it was made (its committed summary.json is this output)."""
     from sern_jax import io, stats
 
-    CELLS, WORLD_A = CELLS_6N, WORLD_A_6N  # noqa: N806: the previous grid's
+    CELLS, WORLD_A = CELLS_6N, WORLD_A_6N  # the previous grid's
     docs = {c: io.load_json(out / f"{c}.json") for c in CELLS if (out / f"{c}.json").exists()}
     if not docs:
         raise ValueError(f"no cell results in {out}")
@@ -445,7 +447,7 @@ TRANSFER_NOTES = {
 
 def transfer_world(cell: str):
     """(ContextConfig, TrialConfig, backend, θ0 directory or None) of a transfer cell."""
-    from sern_jax.grasp import context, depth, sim
+    from sern_jax.grasp import context, sim
 
     if cell not in TRANSFER_CELLS:
         raise ValueError(f"unknown transfer cell {cell!r}; choose from {TRANSFER_CELLS}")
@@ -472,9 +474,10 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
     """Runs one transfer cell; writes ``out/<cell>.json`` (grasp_learning's per-seed format,
     with the world) and returns it. A stopped run is turned into a file of the rounds it
     finished by ``experiments.grasp_learning collect out/runs out``."""
-    from . import grasp_learning
     from sern_jax import io
     from sern_jax.grasp import artifacts, objects, runner
+
+    from . import grasp_learning
 
     t0 = time.perf_counter()
     ctx, trial, backend, theta0_dir = transfer_world(cell)
@@ -516,8 +519,9 @@ def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
     paired by seed), the gain online learning makes in B by each reported round (paired
     t-intervals over seeds), the share of the gap it recovers, the distance to the same
     policy learning in A, and SERN − peer in B (Holm over every cell, peer and round)."""
-    from . import grasp_learning
     from sern_jax import io
+
+    from . import grasp_learning
 
     out = Path(out)
     docs = grasp_learning.load_results(out)

@@ -80,7 +80,7 @@ def _today(cell, lv, **extra):
     import json
 
     ctx, trial = gs.world(cell)
-    r1, o, q, n = lv.shape
+    r1, n = lv.shape[0], lv.shape[-1]
     ex = np.full(lv.shape, 0.5)
     ex[0] = -1.0
     doc = {"label": cell, "setting": "sensitivity", "objects": ["a", "b"],

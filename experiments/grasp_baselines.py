@@ -197,11 +197,56 @@ def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
            "grid": {n: {"field": GRID[n][0], "settings": list(GRID[n][1]),
                         "scores": scores[n], "chosen": choice[n]} for n in knobbed},
            "no_knob": list(NO_KNOB), "wall_s": wall,
+           "resolution": None,
            "axes": "tune_per_seed.npz: [setting, R + 1, O, Q (learners), S]",
            "machine": io.machine(),
            "command": "python -m experiments.grasp_baselines tune " + " ".join(sys.argv[2:])}
+    doc["resolution"] = tuning_resolution(np.stack(lowvars), doc)
     (out / "tuned.json").write_text(json.dumps(doc, indent=1, default=str))
     return doc
+
+
+def tuning_resolution(lowvar: np.ndarray, doc: dict, level: float = 0.95,
+                      power: float = 0.8) -> dict:
+    """How informative a tuning was: per knobbed learner, the chosen setting minus the
+    runner-up (the setting of the second-highest score) on the tuning criterion, paired
+    over the tuning seeds (each seed's value: mean over rounds 1..R and the tuning
+    objects; the settings share seeds, i.e. random numbers), Student-t intervals and Holm
+    over the learners (``stats.paired_differences``), and the seeds a paired t-test would
+    need to resolve the observed difference at the observed per-seed SD (two-sided, normal
+    approximation, ``level`` and ``power``).
+
+    Args:
+      lowvar: ``tune_per_seed.npz``'s ``lowvar_eval`` [setting, R + 1, O, Q, S].
+      doc: ``tuned.json`` (its ``learners`` give Q's order, ``grid`` the scores).
+    """
+    from scipy import stats as sps
+
+    from sern_jax import stats
+
+    names = list(doc["learners"])
+    per_seed = lowvar[:, 1:].mean(axis=(1, 2))  # [setting, Q, S]
+    rows, diffs = {}, []
+    for q, name in enumerate(names):
+        scores = np.asarray(doc["grid"][name]["scores"])
+        order = np.argsort(-scores, kind="stable")  # ties: the first setting listed
+        best, second = int(order[0]), int(order[1])
+        diffs.append(per_seed[best, q] - per_seed[second, q])
+        rows[name] = {"chosen": best, "runner_up": second}
+    paired = stats.paired_differences(np.stack(diffs), names=names, level=level)
+    z = sps.norm.ppf(1 - (1 - level) / 2) + sps.norm.ppf(power)
+    for name, d in zip(names, paired):
+        need = int(np.ceil((z * d.sd / abs(d.mean)) ** 2)) if d.mean and d.sd else None
+        rows[name].update(mean=float(d.mean), sd=float(d.sd), lower=float(d.lower),
+                          upper=float(d.upper), pvalue=float(d.pvalue),
+                          pvalue_holm=float(d.pvalue_holm), resolved=bool(d.resolved),
+                          seeds_for_power=need)
+    return {"level": level, "power": power, "num_seeds": int(lowvar.shape[-1]),
+            "what": ("chosen minus runner-up setting, paired over tuning seeds (mean over "
+                     "rounds 1..R and objects), t interval, Holm over learners; "
+                     "seeds_for_power: seeds a paired t-test needs at this difference and "
+                     "per-seed SD"),
+            "learners": rows}
 
 
 def tuned_values(out: Path, untuned: bool) -> dict:
@@ -424,12 +469,57 @@ def table_md(summary: dict) -> str:
 # ----------------------------------------------------------------------------- bench
 
 
+def parse_bench_learners(text: str | None) -> list[tuple[str, str, dict]]:
+    """``bench --learners``: comma-separated entries ``name`` or ``name:field=value:...``
+    (a learner at other hyperparameters, e.g. ``ensemble_ts:ensemble_size=5``) ->
+    [(label, name, values)]; a value is read as int, else float, else kept as text.
+    Bad names or values: ``ValueError`` naming ``--learners``."""
+    from sern_jax.learners import registry
+
+    if not text:
+        return [(n, n, {}) for n in registry.names()]
+    out = []
+    for entry in text.split(","):
+        name, *pairs = entry.split(":")
+        registry.check_names((name,), "--learners")
+        values = {}
+        for pair in pairs:
+            field, eq, raw = pair.partition("=")
+            if not eq:
+                raise ValueError(f"--learners: {pair!r} in {entry!r} is not field=value")
+            for cast in (int, float, str):
+                try:
+                    values[field] = cast(raw)
+                    break
+                except ValueError:
+                    continue
+        known = {f.name for f in dataclasses.fields(registry.LEARNERS[name].config)}
+        for field in values:
+            if field not in known:
+                raise ValueError(f"--learners: {name} has no hyperparameter {field!r}; "
+                                 f"known: {', '.join(sorted(known)) or 'none'}")
+        registry.make_config(name, values)  # a bad value names its flag
+        out.append((entry, name, values))
+    labels = [e[0] for e in out]
+    if len(set(labels)) != len(labels):
+        raise ValueError(f"--learners: entries must not repeat, got {text}")
+    return out
+
+
 def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
-    """Time of one round's learner work (act over a phase of E = 20 grasps, update, greedy
-    on the 5 + 4 evaluation poses) for every learner, in this process, compiles excluded,
-    on the shipped θ0 network and core set with O × S copies; the learners are timed in
-    turn, ``repeats`` times, and each figure is the median. Contexts, crops and trials are
-    shared by the learners (the same for all) and not timed here."""
+    """Time of one round's learner work for every learner, in this process, compiles
+    excluded, on the shipped θ0 network and core set with O × S copies: ``act`` over a
+    phase of E = 20 grasps as the runner runs it without regret accounting (no π output,
+    ``act_s``) and with it (π output, ``act_probs_s``), ``update``, and greedy on the
+    5 + 4 evaluation poses. Contexts, crops and trials are shared by the learners and not
+    timed. Learners are interleaved: each repeat times every learner once, in an order
+    rotated by one each repeat, so slow drifts of a shared machine's load hit all; every
+    repeat's wall and process-CPU seconds are kept, and ``vs_sern`` ratios are given per
+    repeat (same repeat's SERN) with their median, min and max.
+
+    ``names``: labels of :func:`parse_bench_learners` (``ensemble_ts:ensemble_size=5``)."""
+    import os
+
     import jax
     import jax.numpy as jnp
 
@@ -438,6 +528,7 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
     from sern_jax.learners import base as lbase
     from sern_jax.learners import registry
 
+    entries = parse_bench_learners(",".join(names) if names else None)
     theta0 = artifacts.load_theta0()
     model = runner.quality_model(runner.copies_network(theta0.network.config))
     core = runner.core_data("dpp", theta0)
@@ -453,58 +544,93 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
     u = jnp.asarray(rng.random((num_o, num_s, e)), jnp.float32)
     keys = jax.vmap(lambda o: jax.vmap(lambda s: jax.random.fold_in(
         jax.random.fold_in(jax.random.key(0), o), s))(jnp.arange(num_s)))(jnp.arange(num_o))
-    names = tuple(names or registry.names())
-    work = {}
-    for name in names:
-        lrn = registry.make(name, model, train, config.learner_config(name))
+    pick = jax.vmap(jax.vmap(jax.vmap(lambda x, i: x[i])))
+    load_start = os.getloadavg()
+    work, configs = {}, {}
+    t_compile = time.perf_counter()
+    for label, name, values in entries:
+        lconf = registry.make_config(name, {**config.hyperparameters(), **values})
+        configs[label] = (name, dataclasses.asdict(lconf))
+        lrn = registry.make(name, model, train, lconf)
         state = runner._batched_init(lrn.init)(keys, theta0.params, core)
-        act = runner._batched_act(lrn.act)
+        act = runner._batched_act(lrn.act, False)  # the runner without regret accounting
+        act_probs = runner._batched_act(lrn.act, True)  # with it (π is output)
         update = runner._batched_update(lrn.update)
         greedy = runner._batched_greedy(runner._predict(lrn, model))
 
-        def one_round(state, act=act, update=update, greedy=greedy):
-            action, _ = act(keys, state, image, depth, valid, u, jnp.int32(0))
+        def timed(state=state, act=act, act_probs=act_probs, update=update, greedy=greedy):
+            """[wall, cpu] seconds of (act, act with π, update, greedy)."""
+            rows = []
+
+            def clock(fn):
+                t, c = time.perf_counter(), time.process_time()
+                out = jax.block_until_ready(fn())
+                rows.append((time.perf_counter() - t, time.process_time() - c))
+                return out
+
+            action, _ = clock(lambda: act(keys, state, image, depth, valid, u, jnp.int32(0)))
+            clock(lambda: act_probs(keys, state, image, depth, valid, u, jnp.int32(0)))
             a = jnp.maximum(action, 0)
-            pick = jax.vmap(jax.vmap(jax.vmap(lambda x, i: x[i])))
             batch = lbase.Batch((pick(image, a), pick(depth, a)), action,
                                 jnp.ones(action.shape, jnp.float32))
-            t0 = time.perf_counter()
-            jax.block_until_ready(action)
-            new = update(keys, state, batch)
-            jax.block_until_ready(new)
-            t1 = time.perf_counter()
-            g = greedy(new, image[:, :, :n_eval], depth[:, :, :n_eval], valid[:, :, :n_eval],
-                       u[:, :, :n_eval])
-            jax.block_until_ready(g)
-            return t1 - t0, time.perf_counter() - t1
+            new = clock(lambda: update(keys, state, batch))
+            clock(lambda: greedy(new, image[:, :, :n_eval], depth[:, :, :n_eval],
+                                 valid[:, :, :n_eval], u[:, :, :n_eval]))
+            return np.asarray(rows)  # [4, 2]
 
-        def timed(state, one_round=one_round, act=act):
-            t = time.perf_counter()
-            jax.block_until_ready(act(keys, state, image, depth, valid, u, jnp.int32(0)))
-            t_act = time.perf_counter() - t
-            t_upd, t_greedy = one_round(state)
-            return t_act, t_upd, t_greedy
-
-        timed(state)  # compile
-        work[name] = (timed, state, [])
-    for _ in range(repeats):
-        for name in names:
-            timed, state, rows = work[name]
-            rows.append(timed(state))
-    out = {"machine": io.machine(), "copies": [num_o, num_s], "explore": e, "candidates": k,
-           "eval_poses_per_round": n_eval, "repeats": repeats, "learners": {}}
-    ref = None
-    for name in names:
-        rows = np.asarray(work[name][2])
-        med = np.median(rows, axis=0)
-        total = float(np.median(rows.sum(1)))
-        out["learners"][name] = {"act_s": float(med[0]), "update_s": float(med[1]),
-                                 "greedy_s": float(med[2]), "round_s": total}
-        if name == REFERENCE:
-            ref = total
-    if ref:
-        for name in names:
-            out["learners"][name]["vs_sern"] = out["learners"][name]["round_s"] / ref
+        timed()  # compile
+        work[label] = (timed, [])
+    t_compile = time.perf_counter() - t_compile
+    labels = [label for label, _, _ in entries]
+    for r in range(repeats):
+        shift = r % len(labels)
+        for label in labels[shift:] + labels[:shift]:
+            timed, rows = work[label]
+            rows.append(timed())
+    parts = ("act", "act_probs", "update", "greedy")
+    out = {"machine": io.machine(), "load_average_start": list(load_start),
+           "load_average_end": list(os.getloadavg()), "copies": [num_o, num_s],
+           "explore": e, "candidates": k, "eval_poses_per_round": n_eval,
+           "repeats": repeats, "compile_and_first_call_s": t_compile,
+           "train": dataclasses.asdict(train), "jax": jax.__version__,
+           "fields": ("act_s: act over a phase as the runner runs it without regret "
+                      "accounting (no π output); act_probs_s: with π (regret on); "
+                      "round_s = act_s + update_s + greedy_s (the paper setting); "
+                      "round_regret_s = act_probs_s + update_s + greedy_s; each the median "
+                      "over repeats; *_cpu_s the same in process CPU seconds (all threads); "
+                      "vs_sern: round_s / sern's round_s (medians); vs_sern_per_repeat: "
+                      "each repeat's ratio to the same repeat's sern; times: per repeat "
+                      "[act, act_probs, update, greedy] x [wall, cpu] seconds"),
+           "learners": {}}
+    for label in labels:
+        rows = np.asarray(work[label][1])  # [repeats, 4, 2]
+        name, lconf = configs[label]
+        row = {"learner": name, "config": lconf}
+        for j, part in enumerate(parts):
+            row[f"{part}_s"] = float(np.median(rows[:, j, 0]))
+            row[f"{part}_cpu_s"] = float(np.median(rows[:, j, 1]))
+        for suffix, col in (("s", 0), ("cpu_s", 1)):
+            row[f"round_{suffix}"] = float(np.median(rows[:, [0, 2, 3], col].sum(1)))
+            row[f"round_regret_{suffix}"] = float(np.median(rows[:, 1:, col].sum(1)))
+        row["times"] = rows.tolist()
+        out["learners"][label] = row
+    if REFERENCE in work:
+        ref = np.asarray(work[REFERENCE][1])
+        for label in labels:
+            rows = np.asarray(work[label][1])
+            row = out["learners"][label]
+            row["vs_sern"] = row["round_s"] / out["learners"][REFERENCE]["round_s"]
+            row["vs_sern_cpu"] = (row["round_cpu_s"]
+                                  / out["learners"][REFERENCE]["round_cpu_s"])
+            row["vs_sern_regret"] = (row["round_regret_s"]
+                                     / out["learners"][REFERENCE]["round_regret_s"])
+            per = rows[:, [0, 2, 3], 0].sum(1) / ref[:, [0, 2, 3], 0].sum(1)
+            per_cpu = rows[:, [0, 2, 3], 1].sum(1) / ref[:, [0, 2, 3], 1].sum(1)
+            row["vs_sern_per_repeat"] = per.tolist()
+            row["vs_sern_cpu_per_repeat"] = per_cpu.tolist()
+            for key, v in (("vs_sern", per), ("vs_sern_cpu", per_cpu)):
+                row[f"{key}_median"] = float(np.median(v))
+                row[f"{key}_min"], row[f"{key}_max"] = float(v.min()), float(v.max())
     return out
 
 
@@ -526,7 +652,9 @@ def main(argv=None) -> None:
     p.add_argument("--untuned", action="store_true", help="run with every default")
     p.add_argument("--copies", default="6,5", help="bench: O,S parameter copies")
     p.add_argument("--repeats", type=int, default=5, help="bench: timed rounds per learner")
-    p.add_argument("--learners", default=None, help="bench: comma-separated subset")
+    p.add_argument("--learners", default=None,
+                   help="bench: comma-separated learners, each NAME or "
+                        "NAME:field=value[:field=value] (e.g. ensemble_ts:ensemble_size=5)")
     p.add_argument("--json-out", type=Path, default=None, help="bench: write the JSON here")
     p.add_argument("--run-dir", type=Path, default=None,
                    help="run: the runner's run directory (default OUT/run; large)")
@@ -566,8 +694,19 @@ def main(argv=None) -> None:
         if REFERENCE not in names:
             p.error(f"--policies must include the reference {REFERENCE!r}")
     if a.what == "bench":
-        o, s = (int(v) for v in a.copies.split(","))
+        try:
+            o, s = (int(v) for v in a.copies.split(","))
+            if o < 1 or s < 1:
+                raise ValueError
+        except ValueError:
+            p.error(f"--copies must be O,S with two integers >= 1, got {a.copies!r}")
+        try:
+            parse_bench_learners(a.learners)
+        except ValueError as e:
+            p.error(str(e))
         res = bench((o, s), a.repeats, a.learners.split(",") if a.learners else None)
+        res["command"] = "python -m experiments.grasp_baselines " + " ".join(
+            sys.argv[1:] if argv is None else argv)
         text = json.dumps(res, indent=1)
         print(text)
         if a.json_out:

@@ -306,11 +306,15 @@ def _copy_obs(image, depth, valid, u, t):
 
 
 @functools.lru_cache(maxsize=32)
-def _batched_act(act):
+def _batched_act(act, with_probs: bool = True):
     """act over one phase of every copy: (act_root [O, S] keys, state [O, S], image
     [O, S, N, K, c, c], depth [O, S, N, K], valid [O, S, N, K], u [O, S, N], t0 [])
     -> (action [O, S, N], probs [O, S, N, K]); every grasp of the phase acts on the same
-    state (the runners' phase semantics, see learners.base)."""
+    state (the runners' phase semantics, see learners.base).
+
+    ``with_probs=False`` returns ``(action, None)``: the jitted function does not output
+    the distribution, so XLA drops whatever only the distribution needed (ensemble TS's
+    other members' forwards). The actions are the same computation either way."""
 
     def copy(root, state, image, depth, valid, u, t0):
         def one(e, image, depth, valid, u):
@@ -322,7 +326,11 @@ def _batched_act(act):
         return jax.vmap(one)(jnp.arange(num, dtype=jnp.int32), image, depth, valid, u)
 
     over_s = jax.vmap(copy, (0, 0, 0, 0, 0, 0, None))
-    return jax.jit(jax.vmap(over_s, (0, 0, 0, 0, 0, 0, None)))
+    batched = jax.vmap(over_s, (0, 0, 0, 0, 0, 0, None))
+    if with_probs:
+        return jax.jit(batched)
+    actions = jax.jit(lambda *args: batched(*args)[0])
+    return lambda *args: (actions(*args), None)
 
 
 @functools.lru_cache(maxsize=32)
@@ -732,10 +740,14 @@ def run(
         crops = crops_fn(depth, cands)
         act_root = _stream_keys(keys_os, ACT, r)
         t0 = jnp.int32((r - 1) * num_e)
-        acted = [_batched_act(lrn.act)(act_root, st, crops.image, crops.depth, cands.valid,
-                                       u, t0) for lrn, st in zip(chosen, states)]
+        # π itself is needed only by the regret accounting (its pseudo-regret)
+        with_probs = bool(config.regret_trials)
+        acted = [_batched_act(lrn.act, with_probs)(act_root, st, crops.image, crops.depth,
+                                                   cands.valid, u, t0)
+                 for lrn, st in zip(chosen, states)]
         action = np.stack([np.asarray(a) for a, _ in acted], axis=2)  # [O, S, Q, E]
-        probs = np.stack([np.asarray(p) for _, p in acted], axis=2)  # [O, S, Q, E, K]
+        if with_probs:
+            probs = np.stack([np.asarray(p) for _, p in acted], axis=2)  # [O, S, Q, E, K]
         timings["choose"] += time.perf_counter() - t
         _check_actions(action, np.asarray(cands.valid, bool), config.policies, specs, r)
         t = time.perf_counter()

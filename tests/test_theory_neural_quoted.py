@@ -49,3 +49,26 @@ def test_quoted_figures_match_the_report():
                f"goes from {float(early):.3f} to {float(c_late):.3f}"]
     for q in quoted:
         assert q in text, q
+
+
+def test_t4_full_size_figures_match_the_report():
+    doc = json.loads((REPORT.parent / "check_t4_full.json").read_text())
+    text = " ".join((ROOT / "docs" / "THEORY.md").read_text().split())
+    assert doc["all_as_expected"] and not doc["options"].get("quick")
+    t4 = _cells(doc, "t4_neural_bound")
+    assert t4["verdict"] == "VACUOUS" and t4["seeds"] == 64
+    learned, frozen = t4["cells"]
+    mant, exp = f"{learned['bound']:.2e}".split("e+")
+    sup = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
+    quoted = [f"mean R_T {learned['statistic']:.1f} [{learned['lower']:.1f}, "
+              f"{learned['upper']:.1f}]",
+              f"B(T) = {mant}·10{str(int(exp)).translate(sup)}, log10 T* = "
+              f"{_num(learned['note'], 'log10 T* ='):.1f} |",
+              f"mean R_T = {learned['statistic']:.1f} against B(T) = {mant}·10"
+              f"{str(int(exp)).translate(sup)}, VACUOUS; fitted β = "
+              f"{_num(learned['note'], 'β_s ='):.3f}, log10 T* = "
+              f"{_num(learned['note'], 'log10 T* ='):.1f}; frozen at θ0: β = "
+              f"{_num(frozen['note'], 'β_s ='):.3f}, log10 T* = "
+              f"{_num(frozen['note'], 'log10 T* ='):.1f}"]
+    for q in quoted:
+        assert q in text, q

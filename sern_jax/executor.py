@@ -167,8 +167,8 @@ def plan_run(
     ``runner="auto"`` takes :mod:`sern_jax.fast_softmax` whenever it reproduces
     :func:`make_run` (SERN softmax, one context, a local estimator, no diagnostics, α large
     enough for its float type; see ``fast_softmax.supports``), :mod:`sern_jax.fast_thompson`
-    for Thompson sampling with one context and no diagnostics (on the CPU backend only: on a GPU
-    the general runner was measured faster), and the general runner otherwise;
+    for Thompson sampling with one context and no diagnostics, and the general runner
+    otherwise;
     ``"fast"`` insists on the fast runner (``ValueError`` if unsupported), ``"general"`` on
     :func:`make_run`. ``summary``: the plan's ``fn`` reduces over seeds on the device.
     """
@@ -177,10 +177,11 @@ def plan_run(
     if chunk_size is not None and (isinstance(chunk_size, bool) or int(chunk_size) < 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     # fast_thompson beats the general runner on CPU (0.100M vs 0.047M seed-rounds/s, K = 64,
-    # 2 cores) but not on a GPU (71.7M vs 95.5M on one H100: experiments/results/bench), and
-    # both draw the same arms (tested), so "auto" takes it on CPU only.
-    thompson_fast = fast_thompson.supports(config) and (
-        runner == "fast" or jax.default_backend() == "cpu")
+    # 2 cores) and, since its lanes draw ahead, on a GPU too (182M vs 95.5M seed-rounds/s on
+    # one H100, K = 64, T = 2,000, 200,000 seeds, one process:
+    # experiments/results/bench/bandit_thompson_h100_lookahead.json; 71.7M before), and both
+    # draw the same arms (tested), so "auto" takes it on every backend.
+    thompson_fast = fast_thompson.supports(config)
     supported = runner != "general" and (fast_softmax.supports(config, params)
                                          or thompson_fast)
     if runner == "fast" and not supported:

@@ -274,3 +274,24 @@ def test_docs_copy_of_the_paired_figure_is_the_made_one():
     made = root / "experiments/results/grasp_baselines/baselines_paired.png"
     shown = root / "docs/img/baselines_paired.png"
     assert hashlib.sha256(made.read_bytes()).digest() == hashlib.sha256(shown.read_bytes()).digest()
+
+
+def test_bench_learner_entries_parse_and_refuse(capsys):
+    """bench --learners NAME:field=value entries (the bench records them), and bad ones
+    refused in one line naming the flag, exit 2, before anything compiles."""
+    got = grasp_baselines.parse_bench_learners("sern,ensemble_ts:ensemble_size=5:bootstrap_p=0.5")
+    assert got == [("sern", "sern", {}),
+                   ("ensemble_ts:ensemble_size=5:bootstrap_p=0.5", "ensemble_ts",
+                    {"ensemble_size": 5, "bootstrap_p": 0.5})]
+    for bad, flag in (("ensemble_ts:nu=3", "--learners"), ("nope", "--learners"),
+                      ("ensemble_ts:ensemble_size", "--learners"),
+                      ("ensemble_ts:ensemble_size=0", "--ensemble-size"),
+                      ("sern,sern", "--learners")):
+        with pytest.raises(SystemExit) as e:
+            grasp_baselines.main(["bench", "--learners", bad])
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert flag in err, (bad, err)
+    with pytest.raises(SystemExit) as e:
+        grasp_baselines.main(["bench", "--copies", "6"])
+    assert e.value.code == 2 and "--copies" in capsys.readouterr().err

@@ -19,6 +19,7 @@ with Student-t intervals over seeds, and the core sets' paired differences with 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -82,11 +83,24 @@ def main(argv=None) -> int:
     parser.add_argument("--lr", type=float, default=3e-4)
     parser.add_argument("--out", default="runs/forgetting")
     args = parser.parse_args(argv)
+
+    def bad(message):  # bad input: one line naming the flag, exit 2, before any compile
+        print(f"error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
     for name in ("online_poses", "test_poses", "test_trials", "d0_objects", "d0_poses",
                  "seeds", "steps", "batch_size"):
-        if getattr(args, name) < 1:  # bad input: one line naming the flag, exit 2
-            print(f"error: --{name.replace('_', '-')} must be >= 1", file=sys.stderr)
-            raise SystemExit(2)
+        if getattr(args, name) < 1:
+            bad(f"--{name.replace('_', '-')} must be >= 1")
+    if not (math.isfinite(args.lr) and args.lr > 0):
+        bad(f"--lr must be a finite number > 0 (got {args.lr})")
+
+    from sern_jax.grasp import objects
+
+    try:
+        spec = objects.make_object(args.object)
+    except ValueError:
+        bad(f"--object: unknown object {args.object!r} (see sern grasp show --list)")
 
     import jax
     import jax.numpy as jnp
@@ -94,7 +108,7 @@ def main(argv=None) -> int:
     import optax
 
     from sern_jax import io
-    from sern_jax.grasp import artifacts, dataset, objects, pretrain, sim
+    from sern_jax.grasp import artifacts, dataset, pretrain, sim
     from sern_jax.grasp import quality_net as qn
 
     t0 = time.perf_counter()
@@ -110,7 +124,6 @@ def main(argv=None) -> int:
         return image, depth, lc.label[ctx, slot].astype(np.float32), \
             lc.successes[ctx, slot] / trials
 
-    spec = objects.make_object(args.object)
     on_img, on_dep, on_lab, _ = labelled(jax.random.fold_in(root, 0), spec,
                                          args.online_poses, 1)
     te_img, te_dep, te_lab, te_freq = labelled(jax.random.fold_in(root, 1), spec,

@@ -497,12 +497,15 @@ def test_candidate_success_under_20N_quoted():
     assert "tless_part_c_steel 0.299, the lowest of the 26 screened objects" in doc
 
 
-@pytest.mark.parametrize("flag", ["--seeds", "--steps", "--test-trials"])
-def test_forgetting_bad_input_is_one_line_exit_2(tmp_path, capsys, flag):
+@pytest.mark.parametrize("flag,value", [("--seeds", "0"), ("--steps", "0"),
+                                        ("--test-trials", "0"), ("--lr", "0"),
+                                        ("--lr", "-0.001"), ("--lr", "nan"), ("--lr", "inf"),
+                                        ("--object", "bogus")])
+def test_forgetting_bad_input_is_one_line_exit_2(tmp_path, capsys, flag, value):
     from experiments import core_set_forgetting
 
     with pytest.raises(SystemExit) as e:
-        core_set_forgetting.main([flag, "0", "--out", str(tmp_path / "out")])
+        core_set_forgetting.main([flag, value, "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert e.value.code == 2 and len(err.splitlines()) == 1 and flag in err
     assert not (tmp_path / "out").exists()

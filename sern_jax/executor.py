@@ -177,9 +177,9 @@ def plan_run(
     if chunk_size is not None and (isinstance(chunk_size, bool) or int(chunk_size) < 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     # fast_thompson beats the general runner on CPU (0.100M vs 0.047M seed-rounds/s, K = 64,
-    # 2 cores) and, since its lanes draw ahead, on a GPU too (182M vs 95.5M seed-rounds/s on
+    # 2 cores) and, since its lanes draw ahead, on a GPU too (186M vs 97.4M seed-rounds/s on
     # one H100, K = 64, T = 2,000, 200,000 seeds, one process:
-    # experiments/results/bench/bandit_thompson_h100_lookahead.json; 71.7M before), and both
+    # experiments/results/bench/bandit_thompson_h100_public.json; 71.7M before), and both
     # draw the same arms (tested), so "auto" takes it on every backend.
     thompson_fast = fast_thompson.supports(config)
     supported = runner != "general" and (fast_softmax.supports(config, params)

@@ -85,10 +85,11 @@ def hold(u: Array) -> Array:
     fusion that reads ``u``, as XLA:CPU did (~6 hashes per lane and try in
     :mod:`sern_jax.fast_thompson`). Plain ``sqrt(u·u)`` is simplified to ``|u|`` by XLA.
 
-    Applied on the CPU backend only (where it was measured and tested exact): on one H100 the
-    fast Thompson runner's arms stopped matching the general runner's (0 % of 200,000 seeds
-    identical, 99.999 % before), consistent with a ``sqrt`` that is not correctly rounded
-    there; elsewhere ``u`` is returned as it is.
+    Applied on the CPU backend only (where it was measured and tested exact): on one H100
+    ``sqrt(4u·u)/2`` differs from ``u`` for 277,600 of the 2^23 uniforms (the GPU's ``sqrt``
+    is not correctly rounded; experiments/results/bench/gpu_sqrt_identity.txt), and with it
+    the fast Thompson runner's arms matched the general runner's on 0 % of seeds; elsewhere
+    ``u`` is returned as it is.
     """
     if jax.default_backend() != "cpu":
         return u

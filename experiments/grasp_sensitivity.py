@@ -811,14 +811,18 @@ def main(argv=None) -> int:
     p_tsum = sub.add_parser("transfer-summarise", help="summary.json from saved cells")
     p_tsum.add_argument("out")
     args = parser.parse_args(argv)
+    if args.what in ("summarise", "transfer-summarise"):
+        try:  # bad input (no cell files, mixed grids, ...): one line, exit 2, nothing written
+            s = (summarise if args.what == "summarise" else summarise_transfer)(args.out)
+        except (ValueError, OSError) as exc:
+            print(f"{args.what} OUT: {exc}", file=sys.stderr)
+            return 2
     if args.what == "transfer-summarise":
-        s = summarise_transfer(args.out)
         print(json.dumps({"cells_missing": s["cells_missing"],
                           "resolved": [c["name"] for c in s["comparisons"] if c["resolved"]]},
                          indent=1))
         return 0
     if args.what == "summarise":
-        s = summarise(args.out)
         print(json.dumps({"resolved": s["resolved"], "sign_of_mean": s["sign_of_mean"],
                           "cells_missing": s["cells_missing"]}, indent=1))
         return 0

@@ -174,6 +174,22 @@ def test_grid_refuses_mixing_trials_and_settings(tmp_path):
     assert exc.value.code == 2
 
 
+@pytest.mark.parametrize("what", ["summarise", "transfer-summarise"])
+def test_summarise_of_a_folder_without_cells_is_one_line_exit_2(tmp_path, capsys, what):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    for out in (tmp_path / "nonexistent", empty):
+        assert grasp_sensitivity.main([what, str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(out) in err and "Traceback" not in err
+    assert list(empty.iterdir()) == [] and not (tmp_path / "nonexistent").exists()
+    ok = tmp_path / "ok"  # control: the committed world-A cell alone is accepted
+    ok.mkdir()
+    shutil.copy(SENS_TODAY / "20N_mu0.3-0.8_clean.json" if what == "summarise"
+                else RESULTS / "transfer" / "A.json", ok)
+    assert grasp_sensitivity.main([what, str(ok)]) == 0
+
+
 def test_grid_table_and_prose_quoted(grid):
     assert grasp_sensitivity.sensitivity_markdown(grid) in DOC
     cells = grid["cells"]

@@ -263,6 +263,10 @@ def tuned_values(out: Path, untuned: bool) -> dict:
 # ----------------------------------------------------------------------------- run
 
 
+class DifferentRunError(ValueError):
+    """``run``'s run directory holds another run (one line; ``main`` exits 2)."""
+
+
 def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
         num_objects: int | None, progress: bool, explore: int = 20,
         run_dir: Path | None = None, regret_grasps: int = 0,
@@ -282,6 +286,18 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
                            explore=explore, regret_trials=regret_trials,
                            regret_grasps=regret_grasps, backend=backend)
     run_dir = run_dir or out / "run"
+    # another run's directory is refused before meta.json is touched (the runner, or
+    # learn_units, would refuse it only after meta.json was rewritten with these settings)
+    ckpt = run_dir / "checkpoint.npz"
+    saved = (io.load_npz(ckpt, advice="delete it (or choose another --out) and rerun")
+             if ckpt.exists() else None)
+    if saved is not None:
+        from sern_jax.grasp import runner
+
+        if str(saved.get("fingerprint", "")) != runner.run_fingerprint(config, specs, theta0):
+            raise DifferentRunError(f"--out {out}: {run_dir} holds a different learning run "
+                                    "than these settings; choose another --out (or "
+                                    "--run-dir) or delete it")
     out.mkdir(parents=True, exist_ok=True)
     meta = io.run_metadata(
         experiment="grasp_baselines", objects=[s.name for s in specs],
@@ -301,8 +317,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
     # it started, from which round, and (if it ended) its wall time, timings and trials.
     previous = out / "meta.json"
     calls = json.loads(previous.read_text()).get("calls", []) if previous.exists() else []
-    ckpt = run_dir / "checkpoint.npz"
-    start = int(io.load_npz(ckpt)["next_round"]) if ckpt.exists() else 0
+    start = int(saved["next_round"]) if saved is not None else 0
     call = {"started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "start_round": start, "host": meta["host"], "jax": meta.get("jax"),
             "finished": False}
@@ -667,13 +682,14 @@ def main(argv=None) -> None:
 
     distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
     a = p.parse_args(argv)
-    try:
+    try:  # Ray refusals: one line, exit 2
         ray = distributed.from_args(a)
+        if ray is not None and a.what not in ("tune", "run"):
+            raise ValueError("--ray applies to tune (its three settings are the units) and "
+                             "run (its objects are)")
+        distributed.check_backend(a.backend, ray)  # mjx tasks on a GPU only
     except ValueError as e:
-        p.error(str(e))
-    if ray is not None and a.what not in ("tune", "run"):
-        p.error("--ray applies to tune (its three settings are the units) and run (its "
-                "objects are)")
+        p.exit(2, f"{p.prog}: error: {e}\n")
     for flag, v in (("--seeds", a.seeds), ("--tune-seeds", a.tune_seeds),
                     ("--rounds", a.rounds), ("--tune-rounds", a.tune_rounds),
                     ("--repeats", a.repeats), ("--explore", a.explore)):
@@ -727,6 +743,8 @@ def main(argv=None) -> None:
                 not a.no_progress, a.explore, a.run_dir, a.regret_grasps, names, ray=ray)
         except distributed.UnitFailedError as e:  # one line naming the object
             raise SystemExit(str(e)) from None
+        except DifferentRunError as e:  # nothing written
+            p.exit(2, f"{p.prog}: error: {e}\n")
     elif a.what == "collect":
         collect(a.out)
     else:

@@ -54,6 +54,7 @@ __all__ = [
     "Unit",
     "UnitFailedError",
     "add_arguments",
+    "check_backend",
     "from_args",
     "require_ray",
     "worker_env",
@@ -176,6 +177,17 @@ def from_args(args) -> RayConfig | None:
                        max_retries=getattr(args, "ray_retries", 3))
     require_ray()
     return config
+
+
+def check_backend(backend: str, config: RayConfig | None) -> None:
+    """Refuses ``--backend mjx`` on Ray without ``--ray-gpus``: its tasks would run MJX on
+    their CPUs (``JAX_PLATFORMS=cpu``), another float program than a GPU run, and the run
+    fingerprint does not name the platform, so a GPU-started run directory resumed that way
+    would mix the two. One line naming the flag (ValueError)."""
+    if config is not None and backend == "mjx" and not config.gpus_per_task > 0:
+        raise ValueError("--backend mjx with --ray needs --ray-gpus G > 0 (without it the "
+                         "tasks run MJX on the CPU, another float program than a GPU run of "
+                         "the same run directory); or use --backend native")
 
 
 def require_ray():

@@ -74,6 +74,85 @@ def test_bad_ray_flags_are_one_line(tmp_path, capsys, flags, named):
     assert not out.exists()
 
 
+def test_baselines_ray_refusals_are_one_line(tmp_path, capsys):
+    """`experiments.grasp_baselines` refuses bad Ray flags in one line (not argparse's
+    usage block), exit 2, nothing written."""
+    import experiments.grasp_baselines as grid
+
+    for flags, named in ((["run", "--ray", "--ray-workers", "0"], "--ray-workers"),
+                         (["collect", "--ray"], "--ray applies to tune"),
+                         (["run", "--ray-gpus", "1"], "--ray-gpus")):
+        with pytest.raises(SystemExit) as exc:
+            grid.main(flags + ["--out", str(tmp_path / "o")])
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and len(err.splitlines()) == 1 and named in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_mjx_on_ray_without_gpus_is_refused_in_one_line(tmp_path, capsys):
+    """MJX tasks on the CPU would be another float program than a GPU run of the same run
+    directory (the fingerprint does not name the platform): `--ray-gpus` is required."""
+    pytest.importorskip("ray")
+    import experiments.grasp_baselines as grid
+
+    out = tmp_path / "r"
+    assert main(LEARN + ["--backend", "mjx", "--ray", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--ray-gpus" in err and "mjx" in err, err
+    assert not out.exists()
+    for what in ("run", "tune"):
+        with pytest.raises(SystemExit) as exc:
+            grid.main([what, "--backend", "mjx", "--ray", "--out", str(out)])
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and len(err.splitlines()) == 1 and "--ray-gpus" in err
+    assert not out.exists()
+    distributed.check_backend("mjx", distributed.RayConfig(gpus_per_task=0.5))  # allowed
+    distributed.check_backend("native", distributed.RayConfig())
+    with pytest.raises(ValueError, match="--ray-gpus"):
+        distributed.check_backend("mjx", distributed.RayConfig())
+
+
+def test_baselines_run_refuses_another_runs_directory_before_writing_meta(tmp_path, capsys,
+                                                                        monkeypatch):
+    """A run directory whose checkpoint has another fingerprint: refused in one line, exit
+    2, before meta.json is rewritten with the new settings (it was, before the refusal)."""
+    import experiments.grasp_baselines as grid
+
+    (tmp_path / "run").mkdir()
+    io.save_npz(tmp_path / "run" / "checkpoint.npz", fingerprint=np.str_("0123456789abcdef"),
+                next_round=np.int64(1))
+    meta = json.dumps({"num_seeds": 99, "calls": [{"start_round": 0}]})
+    (tmp_path / "meta.json").write_text(meta)
+    with pytest.raises(SystemExit) as exc:
+        grid.main(["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds",
+                   "2", "--rounds", "1", "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1, err
+    assert "holds a different learning run" in err
+    assert (tmp_path / "meta.json").read_text() == meta
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["meta.json", "run"]
+
+    # the same run's checkpoint (the fingerprint the runner computes) is resumed, not refused
+    from sern_jax.grasp import runner
+
+    specs, theta0 = grid.hard_specs()
+    config = grid.online_config(grid.learners(), grid.tuned_values(tmp_path, True),
+                                num_seeds=2, rounds=1, explore=20, regret_trials=0,
+                                regret_grasps=0, backend="native")
+    io.save_npz(tmp_path / "run" / "checkpoint.npz", next_round=np.int64(1),
+                fingerprint=np.str_(runner.run_fingerprint(config, specs[:1], theta0)))
+
+    def reached(config, specs, run_dir, theta0, progress):
+        raise RuntimeError("runner reached")
+
+    monkeypatch.setattr(grid, "_run", reached)
+    with pytest.raises(RuntimeError, match="runner reached"):
+        grid.main(["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds",
+                   "2", "--rounds", "1", "--no-progress"])
+    doc = json.loads((tmp_path / "meta.json").read_text())
+    assert doc["num_seeds"] == 2 and doc["calls"][-1]["start_round"] == 1
+
+
 def test_worker_env_sets_threads_cache_and_platform(tmp_path, monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=2 "
                                     "intra_op_parallelism_threads=7")

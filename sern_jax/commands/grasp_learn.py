@@ -546,6 +546,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     from sern_jax import distributed, io
 
     ray = distributed.from_args(args)  # None without --ray
+    distributed.check_backend(config.backend, ray)  # mjx tasks on a GPU only
     from sern_jax.grasp import artifacts, runner
 
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as

@@ -135,10 +135,12 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
       sern_jax.distributed.UnitFailedError: a unit failed for good (one line); the run
         directory's checkpoint then holds the rounds every unit finished (when every unit
         has finished round 0; the units' own checkpoints are kept either way).
-      ValueError: the run directory, or a unit's, holds another run.
+      ValueError: the run directory, or a unit's, holds another run; ``--backend mjx``
+        without ``--ray-gpus`` (:func:`sern_jax.distributed.check_backend`).
     """
     from sern_jax import distributed
 
+    distributed.check_backend(config.backend, ray)  # mjx tasks on a GPU only
     out_dir = Path(out_dir)
     names = [s.name for s in specs]
     if not names or len(set(names)) != len(names):

@@ -428,6 +428,29 @@ def test_forgetting_numbers_quoted():
     assert "(another θ0 and other D0-like labels, so not like for like;" in flat
 
 
+def test_defensible_trials_time_step_quoted():
+    """The section's Time step bullet leads with today's 20 N check, the 6 N one after it."""
+    d = json.loads((RESULTS / "trial_checks.json").read_text())
+    d6 = json.loads((RESULTS / "trial_checks_6N.json").read_text())
+    assert d["physics"]["scene"]["finger_force"] == 20.0 == d["default_force_N"]
+    ts, ts6 = d["timestep"], d6["timestep"]
+    a, b = ts["5ms_vs_2.5ms"], ts["5ms_vs_1.25ms"]
+    a6, b6 = ts6["5ms_vs_2.5ms"], ts6["5ms_vs_1.25ms"]
+    assert (a["agree"], a["n"], b["agree"], b["n"], a6["n"]) == (688, 704, 684, 704, 384)
+    ci = lambda v: "–".join(f"{_pct(x):.1f}" for x in v["ci95"])  # noqa: E731
+    quoted = (f"today's 20 N trial (`experiments/results/trial_checks.json`; `docs/GRASP.md` "
+              f"says more): {a['n']} fixed paired trials agree in {_pct(a['fraction'])} % of "
+              f"outcomes between 5 ms and 2.5 ms (Clopper–Pearson 95 % CI {ci(a)} %) and "
+              f"{_pct(b['fraction'])} % between 5 ms and 1.25 ms ({ci(b)} %). Under the "
+              f"previous 6 N trial (`experiments/results/trial_checks_6N.json`) {a6['n']} such "
+              f"trials agreed in {_pct(a6['fraction'])} % and {_pct(b6['fraction'])} % (95 % CI "
+              f"{ci(b6)} %).")
+    assert "97.7 %" in quoted and "97.2 %" in quoted and "96.3–98.7" in quoted
+    sec = " ".join(_section(DOC, "Defensible trials and the hard set").split())
+    assert quoted in sec, quoted
+    assert "6 N θ0 the fresh-trial screen was re-run" in sec
+
+
 # --- Native-MJX agreement and trial rates under the 20 N trial (docs/GRASP.md) ---
 
 AGREE = RESULTS / "agreement"

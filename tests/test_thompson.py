@@ -108,7 +108,10 @@ def test_readme_quotes_the_committed_lookahead_and_h100_bench_files():
 
     root = pathlib.Path(__file__).resolve().parents[1]
     bench = root / "experiments/results/bench"
-    load = lambda name: json.loads((bench / name).read_text())  # noqa: E731
+
+    def load(name):
+        return json.loads((bench / name).read_text())
+
     runs = [load(f"bandit_thompson_2core_lookahead_{i}.json") for i in (1, 2, 3)]
     assert [r["device"]["num_devices"] for r in runs] == [1, 2, 1]
     assert all(r["workload"]["policy"] == "thompson" and r["workload"]["horizon"] == 2000
@@ -134,17 +137,18 @@ def test_readme_quotes_the_committed_lookahead_and_h100_bench_files():
             + ", ".join(f"{r['speedup_vs_numpy']:.1f}×" for r in runs[:2])
             + f" and {runs[2]['speedup_vs_numpy']:.1f}× NumPy in the same process "
             f"({runs[0]['numpy_seed_rounds_per_s'] / 1e6:.2f}M)",
-            f"the fast runner now draws {h100['fast_seed_rounds_per_s'] / 1e6:.0f}M "
-            f"seed-rounds/s against the general runner's "
-            f"{h100['general_seed_rounds_per_s'] / 1e6:.1f}M",
+            (f"the fast runner now draws {h100['fast_seed_rounds_per_s'] / 1e6:.0f}M "
+             f"seed-rounds/s against the general runner's "
+             f"{h100['general_seed_rounds_per_s'] / 1e6:.1f}M"),
             f"`run_seeds(summary=True)` {h100['run_seeds_summary_seed_rounds_per_s'] / 1e6:.0f}M",
-            f"per-seed arrays {soft['run_seeds_seed_rounds_per_s'] / 1e9:.2f}G; "
-            f"**`run_seeds(summary=True)` {soft['run_seeds_summary_seed_rounds_per_s'] / 1e9:.2f}G** "
-            f"({soft['public_over_fast']:.2f}× the engine, "
-            f"{soft['public_over_naive_jax']:.2f}× the naive peer at "
-            f"{soft['naive_jax_seed_rounds_per_s'] / 1e9:.2f}G; "
-            f"{min(paired):.3f}–{max(paired):.3f}× run by run, so short of the 1.3× goal) | "
-            f"{soft['fast_seed_rounds_per_s'] / 1e9:.2f}G"):
+            (f"per-seed arrays {soft['run_seeds_seed_rounds_per_s'] / 1e9:.2f}G; "
+             f"**`run_seeds(summary=True)` "
+             f"{soft['run_seeds_summary_seed_rounds_per_s'] / 1e9:.2f}G** "
+             f"({soft['public_over_fast']:.2f}× the engine, "
+             f"{soft['public_over_naive_jax']:.2f}× the naive peer at "
+             f"{soft['naive_jax_seed_rounds_per_s'] / 1e9:.2f}G; "
+             f"{min(paired):.3f}–{max(paired):.3f}× run by run, so short of the 1.3× goal) | "
+             f"{soft['fast_seed_rounds_per_s'] / 1e9:.2f}G")):
         assert quoted in text, quoted
     # the NumPy reference ran at the same speed in all three (the figure quoted once)
     assert len({f"{r['numpy_seed_rounds_per_s'] / 1e6:.2f}" for r in runs}) == 1

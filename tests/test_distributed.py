@@ -96,10 +96,11 @@ def test_mjx_on_ray_without_gpus_is_refused_in_one_line(tmp_path, capsys):
     import experiments.grasp_baselines as grid
 
     out = tmp_path / "r"
-    assert main(LEARN + ["--backend", "mjx", "--ray", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--ray-gpus" in err and "mjx" in err, err
-    assert not out.exists()
+    for argv in (LEARN, ["grasp", "dataset", "--objects", "2", "--no-progress"]):
+        assert main(argv + ["--backend", "mjx", "--ray", "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--ray-gpus" in err and "mjx" in err, err
+        assert not out.exists()
     for what in ("run", "tune"):
         with pytest.raises(SystemExit) as exc:
             grid.main([what, "--backend", "mjx", "--ray", "--out", str(out)])

@@ -105,6 +105,7 @@ def _run_dataset(args) -> int:
     _check_seed(args.seed)
     _check_out(args.out)
     ray = distributed.from_args(args)  # None without --ray
+    distributed.check_backend(args.backend, ray)  # mjx tasks on a GPU only
     from sern_jax.grasp import budget, dataset
 
     try:

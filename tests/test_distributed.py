@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -284,6 +285,13 @@ def local_ray():
     ray.shutdown()
 
 
+def _error_lines(err: str) -> list[str]:
+    """stderr's lines naming an error, less those Ray forwards from its workers (prefixed
+    ``(<task> pid=N)``: e.g. a cancelled worker's "Fatal Python error: Aborted")."""
+    return [line for line in err.splitlines()
+            if "error" in line and not re.match(r"(\x1b\[\d+m)?\(\S+ pid=\d+", line)]
+
+
 def _arrays(path: Path) -> dict[str, np.ndarray]:
     return io.load_npz(path)
 
@@ -328,7 +336,7 @@ def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, ca
 
 def test_a_task_no_node_can_hold_is_one_line(local_ray, tmp_path, capsys):
     assert main(TINY + ["--ray", "--ray-cpus", "3", "--out", str(tmp_path / "r")]) == 2
-    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    err = _error_lines(capsys.readouterr().err)
     assert len(err) == 1 and "--ray-cpus 3" in err[0] and "largest has 2" in err[0], err
 
 
@@ -547,7 +555,7 @@ def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
         (par / name).unlink()
     monkeypatch.setattr(learn_units, "run_unit", _unit_fails_for_box)
     assert main(LEARN + ["--ray", "--out", str(par)]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    err = _error_lines(capsys.readouterr().err)
     assert len(err) == 1 and err[0].startswith("sern: error: --ray: unit object_box "), err
     assert "RuntimeError: injected failure on the box" in err[0]
     assert not (par / "units" / "object_box" / "checkpoint.npz").exists()
@@ -664,7 +672,7 @@ def test_failing_unit_through_the_command_is_exit_1_one_line(local_ray, tmp_path
     out = tmp_path / "r"
     assert main(TINY + ["--ray", "--out", str(out)]) == 1
     # (Ray may forward earlier tests' worker warnings to stderr: look at sern's own line)
-    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    err = _error_lines(capsys.readouterr().err)
     assert len(err) == 1 and err[0].startswith("sern: error: --ray: unit softmax__seeds_"), err
     assert "RuntimeError: injected chunk failure" in err[0]
 

@@ -676,6 +676,14 @@ def _run_grid(args, transfer: bool = False) -> int:
     if ray is not None and args.deadline:
         raise SystemExit("--deadline applies to the worker processes, not --ray (stop the "
                          "run and rerun it: finished cells are kept)")
+    if transfer:  # the mjx cell on Ray needs GPU tasks (distributed.check_backend)
+        try:
+            for c in cells:
+                distributed.check_backend(transfer_world(c)[2], ray)
+        except ValueError:
+            print("error: --ray-gpus: the mjx cell on --ray needs --ray-gpus G > 0 (its tasks "
+                  "would run MJX on their CPUs); leave it out with --cells", file=sys.stderr)
+            return 2
     if not transfer:
         try:  # the grid's settings pinned in out/grid.json (refuses another grid's --out)
             check_grid(out, args.seeds, args.rounds, args.objects, write=False)

@@ -1,6 +1,7 @@
 """experiments.grasp_sensitivity: cell names map to worlds, and summarise's paired
 t intervals, Holm and transfer figures match a hand computation on synthetic cells."""
 
+import argparse
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ from scipy import stats as sps
 
 from experiments import grasp_learning as gl
 from experiments import grasp_sensitivity as gs
-from sern_jax import io, stats
+from sern_jax import distributed, io, stats
 from sern_jax.grasp import context, sim
 
 
@@ -173,3 +174,19 @@ def test_check_grid_pins_the_settings(tmp_path):
     with pytest.raises(gs.GridMismatch, match="previous trial"):
         gs.check_grid(old, 10, 5, 6)
     assert not (old / "grid.json").exists()
+
+
+def test_transfer_mjx_cell_on_ray_without_gpus_is_refused(tmp_path, capsys):
+    """`transfer --ray` with the mjx cell and no --ray-gpus: one line naming --ray-gpus, exit 2,
+    nothing written (its tasks would run MJX on the CPU). Control: a native cell alone passes
+    this check (it is refused later only for want of a reachable Ray, which is not asked here)."""
+    pytest.importorskip("ray")
+    out = tmp_path / "t"
+    code = gs.main(["transfer", "--ray", "--cells", "mjx", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--ray-gpus" in err[0]
+    assert not out.exists()
+    args = argparse.Namespace(ray=distributed.LOCAL, ray_workers=None, ray_cpus=1, ray_gpus=0.0, ray_retries=3)
+    config = distributed.from_args(args)
+    distributed.check_backend(gs.transfer_world("friction_low")[2], config)  # no error
+

@@ -649,9 +649,43 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
     return out
 
 
+def record_learn_timing(run_dir: Path, summary_json: Path, time_file: Path) -> dict:
+    """One JSON from a timed ``sern grasp learn`` (``paper_all_learners_2core.json``): its
+    ``--json-out`` file (wall seconds, machine at the end), the run directory's
+    ``metadata.json`` (versions, commit, timings, trial counts) and ``config.json``, and
+    ``/usr/bin/time -v -o TIME_FILE``'s CPU seconds, elapsed time and peak memory."""
+    import re
+
+    out = json.loads(Path(summary_json).read_text())
+    meta = json.loads((Path(run_dir) / "metadata.json").read_text())
+    cfg = json.loads((Path(run_dir) / "config.json").read_text())
+    text = Path(time_file).read_text()
+
+    def field(name):
+        m = re.search(re.escape(name) + r":\s*(.+)", text)
+        if m is None:
+            raise SystemExit(f"{time_file} has no '{name}' line (not /usr/bin/time -v output)")
+        return m.group(1).strip()
+
+    return {"what": ("a timed sern grasp learn: wall seconds from its --json-out, CPU from "
+                     "/usr/bin/time -v"),
+            "command": "/usr/bin/time -v -o " + str(time_file) + " "
+                       + field("Command being timed").strip('"'),
+            "seconds": out["seconds"], "machine_at_end": out["machine"],
+            "git_commit": meta.get("git_commit"), "versions": meta.get("versions"),
+            "timings": meta.get("timings"), "trial_counts": meta.get("trial_counts"),
+            "user_cpu_s": float(field("User time (seconds)")),
+            "system_cpu_s": float(field("System time (seconds)")),
+            "percent_cpu": field("Percent of CPU this job got"),
+            "elapsed": field("Elapsed (wall clock) time (h:mm:ss or m:ss)"),
+            "max_rss_kb": int(field("Maximum resident set size (kbytes)")),
+            "config": cfg.get("config")}
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize"))
+    p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize",
+                                    "record-learn"))
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
     p.add_argument("--seeds", type=int, default=20)
     p.add_argument("--tune-seeds", type=int, default=4)
@@ -678,6 +712,10 @@ def main(argv=None) -> None:
     p.add_argument("--policies", default=None,
                    help="run: comma-separated learners (default: every registered one)")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--learn-run", type=Path, default=None,
+                   help="record-learn: a timed `sern grasp learn` run directory; its "
+                        "--json-out file and /usr/bin/time -v -o file are DIR.json and "
+                        "DIR.time beside it (written to --json-out)")
     from sern_jax import distributed
 
     distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
@@ -745,6 +783,20 @@ def main(argv=None) -> None:
             raise SystemExit(str(e)) from None
         except DifferentRunError as e:  # nothing written
             p.exit(2, f"{p.prog}: error: {e}\n")
+    elif a.what == "record-learn":
+        if a.learn_run is None or a.json_out is None:
+            p.error("record-learn needs --learn-run DIR and --json-out FILE")
+        run_dir = a.learn_run
+        for f in (run_dir / "metadata.json", run_dir.with_suffix(".json"),
+                  run_dir.with_suffix(".time")):
+            if not f.exists():
+                p.error(f"--learn-run: {f} is missing")
+        doc = record_learn_timing(run_dir, run_dir.with_suffix(".json"),
+                                  run_dir.with_suffix(".time"))
+        a.json_out.parent.mkdir(parents=True, exist_ok=True)
+        a.json_out.write_text(json.dumps(doc, indent=1, default=str))
+        print(json.dumps({k: doc[k] for k in ("seconds", "user_cpu_s", "system_cpu_s",
+                                              "trial_counts")}))
     elif a.what == "collect":
         collect(a.out)
     else:

@@ -318,3 +318,32 @@ def test_bench_learner_entries_parse_and_refuse(capsys):
     with pytest.raises(SystemExit) as e:
         grasp_baselines.main(["bench", "--copies", "6"])
     assert e.value.code == 2 and "--copies" in capsys.readouterr().err
+
+
+def test_record_learn_timing_reads_the_three_files(tmp_path, capsys):
+    """record-learn: wall seconds and machine from --json-out, CPU from /usr/bin/time -v,
+    timings and trial counts from metadata.json; a missing file is refused naming the flag."""
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "metadata.json").write_text(json.dumps(
+        {"git_commit": "abc", "timings": {"update": 1.5}, "trial_counts": {"simulated": 7}}))
+    (run / "config.json").write_text(json.dumps({"config": {"policies": ["sern"]}}))
+    (tmp_path / "r.json").write_text(json.dumps({"seconds": 12.5, "machine": {"cpu": "x"}}))
+    (tmp_path / "r.time").write_text(
+        '\tCommand being timed: "sern grasp learn --out r"\n\tUser time (seconds): 20.25\n'
+        "\tSystem time (seconds): 1.50\n\tPercent of CPU this job got: 170%\n"
+        "\tElapsed (wall clock) time (h:mm:ss or m:ss): 0:12.60\n"
+        "\tMaximum resident set size (kbytes): 1234\n")
+    grasp_baselines.main(["record-learn", "--learn-run", str(run), "--json-out",
+                          str(tmp_path / "out.json")])
+    d = json.loads((tmp_path / "out.json").read_text())
+    assert (d["seconds"], d["user_cpu_s"], d["system_cpu_s"], d["max_rss_kb"]) == (
+        12.5, 20.25, 1.5, 1234)
+    assert d["machine_at_end"] == {"cpu": "x"} and d["trial_counts"] == {"simulated": 7}
+    assert d["command"].endswith("sern grasp learn --out r")
+    (tmp_path / "r.time").unlink()
+    with pytest.raises(SystemExit) as e:
+        grasp_baselines.main(["record-learn", "--learn-run", str(run), "--json-out",
+                              str(tmp_path / "out2.json")])
+    assert e.value.code == 2 and "--learn-run" in capsys.readouterr().err
+    assert not (tmp_path / "out2.json").exists()

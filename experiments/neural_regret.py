@@ -70,18 +70,22 @@ class NeuralRegretExperiment:
 
     def fingerprint(self) -> str:
         """Hash of the fields that change results (not the chunk size). The Neural-Linear
-        options enter only when they differ from what every run made before they existed
-        used (network, arm), so those runs keep their fingerprint and resume."""
+        options enter only when neural_lints or neural_linucb is among the policies (they
+        change nothing else) and differ from what every run made before they existed used
+        (network, arm), so those runs keep their fingerprint and resume: a Neural-Linear run
+        made before the pooled default resumes with ``--nl-sigma2 arm``."""
         d = dataclasses.asdict(self)
         d.pop("chunk_size")
+        uses_nl = any(_learner_name(p) in NL_LEARNERS for p in self.policies)
         for name, before in _LEGACY.items():
-            if d[name] == before:
+            if not uses_nl or d[name] == before:  # they change nothing without those learners
                 d.pop(name)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
 # Neural-Linear options and the value runs made before the option existed used.
 _LEGACY = {"nl_prior_mean": "network", "nl_sigma2": "arm"}
+NL_LEARNERS = ("neural_lints", "neural_linucb")  # the learners the nl_* options act on
 
 
 def _learner_name(policy: str) -> str:
@@ -204,19 +208,7 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
         params = problem.params
     else:
         runs, problem, cfg = build_runs(exp)
-    if run_dir.exists() and not run_dir.is_dir():
-        raise ValueError(f"--out {run_dir} exists and is not a directory")
-    cfg_path = run_dir / "config.json"
-    if cfg_path.exists():
-        try:
-            old = io.load_json(cfg_path)
-        except (OSError, ValueError):
-            raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete it") \
-                from None
-        if old.get("fingerprint") != exp.fingerprint():
-            raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
-                             f"{old.get('fingerprint')} != {exp.fingerprint()}); choose "
-                             f"another --out or delete it")
+    _check_run_dir(exp, run_dir)
     probe = run_dir
     while not probe.exists() and probe != probe.parent:
         probe = probe.parent
@@ -281,6 +273,23 @@ def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print,
     return run_dir
 
 
+def _check_run_dir(exp: NeuralRegretExperiment, run_dir: Path) -> None:
+    """``run_dir`` is absent, or a directory holding this experiment (its fingerprint)."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"--out {run_dir} exists and is not a directory")
+    cfg_path = run_dir / "config.json"
+    if cfg_path.exists():
+        try:
+            old = io.load_json(cfg_path)
+        except (OSError, ValueError):
+            raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete it") \
+                from None
+        if old.get("fingerprint") != exp.fingerprint():
+            raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
+                             f"{old.get('fingerprint')} != {exp.fingerprint()}); choose "
+                             f"another --out or delete it")
+
+
 def run_delta_sweep(exp: NeuralRegretExperiment, deltas, out_root: str | Path, *,
                     progress: bool = True, log=print) -> list[Path]:
     """The wheel experiment at every δ of ``deltas``, one run directory each
@@ -294,11 +303,20 @@ def run_delta_sweep(exp: NeuralRegretExperiment, deltas, out_root: str | Path, *
     if not deltas or len(set(deltas)) != len(deltas):
         raise ValueError(f"--deltas must list distinct values, got {deltas}")
     for d in deltas:
-        cp.make_problem("wheel", delta=d, num_arms=exp.num_arms)  # one line naming --delta
+        if not (math.isfinite(d) and 0.0 < d < 1.0):
+            raise ValueError(f"--deltas: every δ must lie in (0, 1), got {d!r}")
+    names = [f"d{d:g}" for d in deltas]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--deltas: values that share a run directory name "
+                         f"({', '.join(names)}); give δ that differ in 6 significant digits")
+    for d, name in zip(deltas, names):  # everything refused before the first δ runs
+        cp.make_problem("wheel", delta=d, num_arms=exp.num_arms)
         _check(dataclasses.replace(exp, delta=d))
+        _check_run_dir(dataclasses.replace(exp, delta=d), Path(out_root) / name)
     cache: dict = {}
-    return [run_experiment(dataclasses.replace(exp, delta=d), Path(out_root) / f"d{d:g}",
-                           progress=progress, log=log, sweep_cache=cache) for d in deltas]
+    return [run_experiment(dataclasses.replace(exp, delta=d), Path(out_root) / name,
+                           progress=progress, log=log, sweep_cache=cache)
+            for d, name in zip(deltas, names)]
 
 
 def _ratio_interval(num: np.ndarray, den: np.ndarray, num_boot: int = 2000,

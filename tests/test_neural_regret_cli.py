@@ -99,9 +99,12 @@ def test_neural_linear_flags_are_refused_by_the_tabular_estimators(tmp_path, cap
 def test_neural_linear_options_enter_the_fingerprint_only_when_set():
     """Runs made before --nl-sigma2 / --nl-prior-mean existed (arm, network) keep their
     fingerprint, so they resume; another value is another run."""
+    import dataclasses
+
     from experiments.neural_regret import NeuralRegretExperiment as Exp
 
-    legacy = Exp(nl_sigma2="arm", nl_prior_mean="network")
+    nl_pol = ("neural_lints", "uniform")
+    legacy = Exp(policies=nl_pol, nl_sigma2="arm", nl_prior_mean="network")
     fields = {f: v for f, v in __import__("dataclasses").asdict(legacy).items()
               if f not in ("nl_sigma2", "nl_prior_mean")}
     import hashlib
@@ -109,8 +112,16 @@ def test_neural_linear_options_enter_the_fingerprint_only_when_set():
     before = hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
     assert legacy.fingerprint() == before  # the hash of a run made before the fields
     assert Exp().nl_sigma2 == "pooled"  # today's default: another run
-    assert legacy.fingerprint() != Exp().fingerprint()
-    assert legacy.fingerprint() != Exp(nl_sigma2="arm", nl_prior_mean="zero").fingerprint()
+    assert legacy.fingerprint() != Exp(policies=nl_pol).fingerprint()
+    assert legacy.fingerprint() != Exp(policies=nl_pol, nl_sigma2="arm",
+                                       nl_prior_mean="zero").fingerprint()
+    # without a Neural-Linear learner the options change nothing, so they never enter
+    plain = Exp(policies=("sern", "greedy"), nl_sigma2="arm")
+    assert plain.fingerprint() == Exp(policies=("sern", "greedy")).fingerprint()
+    assert plain.fingerprint() == Exp(policies=("sern", "greedy"), nl_sigma2="pooled",
+                                      nl_prior_mean="zero").fingerprint()
+    nl = Exp(policies=("sern", "neural_lints"))
+    assert nl.fingerprint() != dataclasses.replace(nl, nl_sigma2="arm").fingerprint()
 
 
 def test_delta_sweep_compiles_once_and_matches_single_runs(run_dir, tmp_path):
@@ -146,14 +157,32 @@ def test_delta_sweep_compiles_once_and_matches_single_runs(run_dir, tmp_path):
 
 
 @pytest.mark.parametrize("extra, flag", [
-    (["--deltas", "0.5,1.5"], "--delta"),
+    (["--deltas", "0.5,1.5"], "--deltas"),
+    (["--deltas", "0.5,nan"], "--deltas"),
     (["--deltas", "0.5,x"], "--deltas"),
     (["--deltas", "0.5,0.5"], "--deltas"),
+    (["--deltas", "0.95,0.950000001"], "--deltas"),  # one folder name, d0.95
+    (["--deltas", "0.5", "--delta", "0.9"], "--deltas replaces --delta"),
     (["--deltas", "0.5", "--problem", "linear"], "--deltas"),
 ])
 def test_bad_deltas_are_one_line_before_anything_runs(extra, flag, tmp_path, capsys):
     out = tmp_path / "bad"
-    assert cli.main(ARGS + extra + ["--out", str(out)]) == 2
+    argv = [a for a in ARGS]
+    argv[argv.index("--delta"):argv.index("--delta") + 2] = []
+    assert cli.main(argv + extra + ["--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert flag in err and "\n" not in err, err
     assert not out.exists()
+
+
+def test_delta_sweep_checks_every_folder_before_the_first_runs(tmp_path, capsys):
+    """A sweep whose second folder holds another experiment is refused before d0.5 runs."""
+    out = tmp_path / "sweep"
+    (out / "d0.7").mkdir(parents=True)
+    (out / "d0.7" / "config.json").write_text(json.dumps({"fingerprint": "other"}))
+    argv = [a for a in ARGS]
+    argv[argv.index("--delta"):argv.index("--delta") + 2] = []
+    assert cli.main(argv + ["--deltas", "0.5,0.7", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "d0.7" in err and "\n" not in err, err
+    assert not (out / "d0.5").exists()

@@ -57,9 +57,9 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="bernoulli (the tabular engine's K-armed / finite-context problem); "
                         "with --estimator neural: wheel (Riquelme et al. 2018, --delta), "
                         "finite (--contexts feature vectors, gap --gap), linear")
-    p.add_argument("--delta", type=float, default=_NEURAL.delta,
-                   help="the wheel bandit's δ in (0, 1) (Riquelme et al.: 0.5, 0.7, 0.9, "
-                        "0.95, 0.99)")
+    p.add_argument("--delta", type=float, default=None,
+                   help=f"the wheel bandit's δ in (0, 1) (Riquelme et al.: 0.5, 0.7, 0.9, "
+                        f"0.95, 0.99; default {_NEURAL.delta})")
     p.add_argument("--update-every", type=int, default=_NEURAL.update_every,
                    help="neural: decisions between network updates (divides --horizon)")
     p.add_argument("--hidden", default=",".join(map(str, _NEURAL.hidden)),
@@ -73,14 +73,15 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
     p.add_argument("--deltas", default=None,
                    help="neural wheel: a comma list of δ, one run directory each under --out "
                         "(d<δ>), one compilation for all (δ is a traced argument); replaces "
-                        "--delta")
+                        "--delta (refused together)")
     p.add_argument("--nl-prior-mean", default=None,
                    help=f"neural: neural_lints/neural_linucb centre their regression on the "
                         f"network's r̂ (network) or on 0 (zero) (default {_NEURAL.nl_prior_mean})")
     p.add_argument("--nl-sigma2", default=None,
                    help=f"neural: neural_lints/neural_linucb share one noise variance σ² "
                         f"across arms (pooled) or keep one per arm (arm) (default "
-                        f"{_NEURAL.nl_sigma2})")
+                        f"{_NEURAL.nl_sigma2}; a Neural-Linear folder made before the "
+                        f"pooled default resumes with arm)")
     p.add_argument("--context-dim", type=int, default=_NEURAL.context_dim,
                    help="neural finite/linear problems: context feature dimension d")
     p.add_argument("--arms", type=int, default=None,
@@ -167,7 +168,7 @@ def _run_neural(args, make_figures: Callable | None) -> int:
     policies = (nd.policies if args.policies is None
                 else tuple(s.strip() for s in args.policies.split(",") if s.strip()))
     exp = mod.NeuralRegretExperiment(
-        policies=policies, problem=args.problem, delta=args.delta,
+        policies=policies, problem=args.problem, delta=_or(args.delta, nd.delta),
         num_arms=_or(args.arms, nd.num_arms), num_contexts=_or(args.contexts, nd.num_contexts),
         gap=args.gap, context_dim=args.context_dim, horizon=_or(args.horizon, nd.horizon),
         num_seeds=_or(args.seeds, nd.num_seeds), update_every=args.update_every,
@@ -178,6 +179,8 @@ def _run_neural(args, make_figures: Callable | None) -> int:
         nl_prior_mean=_or(args.nl_prior_mean, nd.nl_prior_mean),
         nl_sigma2=_or(args.nl_sigma2, nd.nl_sigma2))
     if args.deltas is not None:
+        if args.delta is not None:
+            raise ValueError("--deltas replaces --delta; give one of them")
         try:
             deltas = [float(v) for v in args.deltas.split(",") if v.strip()]
         except ValueError:
@@ -212,7 +215,7 @@ def run(args, *, defaults: Any, run_experiment: Callable,
     if args.problem != "bernoulli":
         raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
                          f"estimators run --problem bernoulli)")
-    for flag in ("nl_prior_mean", "nl_sigma2", "deltas"):
+    for flag in ("nl_prior_mean", "nl_sigma2", "deltas", "delta"):
         if getattr(args, flag) is not None:
             raise ValueError(f"--{flag.replace('_', '-')} applies to --estimator neural, not "
                              f"the tabular estimators")

@@ -98,7 +98,12 @@ class NeuralRunConfig:
 
 
 class NeuralDiag(NamedTuple):
-    """Per-seed sums at each checkpoint (scaled [0, 1] units), all [G]."""
+    """Per-seed sums at each checkpoint (scaled [0, 1] units), all [G].
+
+    ``inv_sqrt_chosen`` / ``inv_sqrt_best`` use the pull counts at the start of each update
+    phase (``update_every`` rounds), not N(t−1) at every round: counts only grow within a
+    phase, so each term is ≥ Theorem 3's (N(t−1) + 1)^{−1/2} and a bound built on them is
+    conservative (larger)."""
 
     err_chosen: Array  # Σ_t |r̂_{a_t}(x_t) − r_{a_t}(x_t)|
     err_best: Array  # Σ_t |r̂_{a*_t}(x_t) − r_{a*_t}(x_t)|, a*_t = argmax_a r_a(x_t)

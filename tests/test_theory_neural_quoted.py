@@ -1,10 +1,13 @@
-"""The figures docs/THEORY.md quotes for t3_neural_inequality and alg1_neural_argmax are those
-of the committed JSON report of the full-size `sern check` run
-(experiments/results/theory_neural/check_t3_alg1_full.json)."""
+"""The figures docs/THEORY.md quotes for the neural checks (t3_neural_inequality,
+alg1_neural_argmax, t4_neural_bound) are those of the committed JSON reports of `sern check`
+runs (experiments/results/theory_neural/check_*.json)."""
 
 import json
+import math
 import re
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORT = ROOT / "experiments" / "results" / "theory_neural" / "check_t3_alg1_full.json"
@@ -19,34 +22,136 @@ def _num(note, label):
     return float(re.search(re.escape(label) + r" ([-\d.]+)", note).group(1))
 
 
-def test_quoted_figures_match_the_report():
-    doc = json.loads(REPORT.read_text())
-    text = " ".join((ROOT / "docs" / "THEORY.md").read_text().split())
-    assert doc["all_as_expected"] and not doc["options"].get("quick")
-    t3 = _cells(doc, "t3_neural_inequality")
+def _t99(cell, n):
+    """Student t 99% (n − 1 dof) from a framework.mean_cell cell: its mean and its two-sided
+    normal-theory upper end give se = (upper − mean)/z_0.995."""
+    from scipy import stats
+
+    se = (cell["upper"] - cell["statistic"]) / stats.norm.ppf(0.995)
+    h = stats.t.ppf(0.995, n - 1) * se
+    return cell["statistic"] - h, cell["statistic"] + h
+
+
+def _m(x, fmt):
+    return format(x, fmt).replace("-", "−")
+
+
+def _text():
+    return " ".join((ROOT / "docs" / "THEORY.md").read_text().split())
+
+
+def _load(name):
+    return json.loads((REPORT.parent / name).read_text())
+
+
+def test_t3_figures_match_the_reports():
+    text = _text()
+    full, mut = _load("check_t3_full.json"), _load("check_t3_mutated_full.json")
+    quick, mutq = _load("check_t3_alg1_quick.json"), _load("check_t3_mutated_quick.json")
+    assert full["all_as_expected"] and not full["options"]["quick"]
+    assert not full["options"]["wrong_bounds"] and mut["options"]["wrong_bounds"]
+    assert quick["options"]["quick"] and mutq["options"]["quick"] and mutq["options"]["wrong_bounds"]
+    t3 = _cells(full, "t3_neural_inequality")
     assert t3["verdict"] == "PASS" and t3["seeds"] == 64
     paper, pathwise, ingredient = t3["cells"]
-    n = paper["note"]
-    quoted = [f"mean R_T {_num(n, 'R_T'):.1f} (paper's regret) against a bound of "
-              f"{_num(n, 'vs bound'):.0f}",
-              f"β = {_num(n, 'β ='):.3f}",
-              f"β Σ(N_{{a*}}+1)^{{−1/2}} {_num(n, '^-½'):.1f}",
-              "per-seed difference " + f"{paper['statistic']:.0f} [{paper['lower']:.0f}, "
-              f"{paper['upper']:.0f}]".replace("-", "−"),
-              f"{pathwise['statistic']:.3f} (mean R_T {_num(pathwise['note'], 'R_T(per-context)'):.1f} "
-              f"against {_num(pathwise['note'], 'vs rhs'):.0f})",
-              f"= {_num(ingredient['note'], 'ratio'):.3f}, the difference "
-              f"{ingredient['statistic']:.1f} [{ingredient['lower']:.2f}, {ingredient['upper']:.1f}]",
-              f"({100 * _num(ingredient['note'], 'â* ≠ a*:'):.1f}% of the rounds)"]
+    assert paper["vacuous"] and not pathwise["vacuous"]
+    n, pn = paper["note"], pathwise["note"]
+    bound, trivial = _num(n, "vs bound"), _num(n, "Δ_max·T =")
+    assert bound >= trivial  # VACUOUS: the mean bound reaches Δ_max·T
+    assert "α=0.1" in paper["label"]
+    # α ln K at α = 0.5 exceeds both gaps; at α = 0.1 it is below them
+    g, dmax = _num(pn, "(g"), _num(n, "(Δ_max")
+    assert 0.5 * math.log(3) > g > dmax > 0.1 * math.log(3)
+    lo, hi = _t99(paper, 64)
+    ilo, ihi = _t99(ingredient, 64)
+    qi = _cells(quick, "t3_neural_inequality")["cells"][2]
+    qlo, qhi = _t99(qi, 32)
+    m_path = _cells(mut, "t3_neural_inequality")["cells"][1]["statistic"]
+    mq_path = _cells(mutq, "t3_neural_inequality")["cells"][1]["statistic"]
+    assert _cells(mut, "t3_neural_inequality")["verdict"] == "FAIL"
+    assert _cells(mutq, "t3_neural_inequality")["verdict"] == "FAIL"
+    assert mq_path < 0  # the quick-size control fails too
+    old = _cells(json.loads(REPORT.read_text()), "t3_neural_inequality")
+    quoted = [
+        f"min (rhs − R_t)/rhs = {pathwise['statistic']:.3f} ≥ 0, rhs below the trivial g·t on "
+        f"{_num(pn, 'on'):.1f}% of seed-checkpoints; paper's form VACUOUS (mean bound "
+        f"{bound:.1f} ≥ Δ_max·T = {trivial:.1f}) |",
+        f"span Δ_max = {dmax:.3f}", f"Δ_max·T = {trivial:.1f}, and the largest per-context gap "
+        f"is g = {g:.3f}",
+        f"α ln K = {0.5 * math.log(3):.3f} per round", f"α ln K = {0.1 * math.log(3):.3f}.",
+        f"is {pathwise['statistic']:.3f} (mean R_T {_num(pn, 'R_T(per-context)'):.1f} against "
+        f"{_num(pn, 'vs rhs'):.1f}), with the right-hand side below g·t on "
+        f"{_num(pn, 'on'):.1f}% of the seed-checkpoints",
+        f"the smallest margin is {_m(m_path, '.3f')} (FAIL",
+        f"(β = {_num(n, 'β ='):.3f}): mean R_T {_m(_num(n, 'R_T'), '.1f')}",
+        f"mean bound of {bound:.1f} (β Σ(N_{{a*}}+1)^{{−1/2}} {_num(n, '^-½'):.1f}, "
+        f"β Σ(N_{{a_t}}+1)^{{−1/2}} {_num(n, 'β Σ(N_at+1)^-½'):.1f}, Σ 1{{â* ≠ a*}} "
+        f"{_num(n, 'Σ 1{â*≠a*}'):.1f}, α ln K·T {_num(n, 'α ln K·T'):.1f}), which exceeds "
+        f"Δ_max·T = {trivial:.1f}",
+        f"difference {_m(paper['statistic'], '.0f')} [{_m(lo, '.0f')}, {_m(hi, '.0f')}], "
+        f"Student t 99% over 64 seeds",
+        f"the bound is {_num(n, 'α ln K·T'):.1f} and R_T still lies below it",
+        f"= {_num(ingredient['note'], 'ratio'):.3f}, difference "
+        f"{_m(ingredient['statistic'], '.1f')} [{_m(ilo, '.1f')}, {_m(ihi, '.1f')}]",
+        f"quick size {_num(qi['note'], 'ratio'):.3f}, {_m(qi['statistic'], '.1f')} "
+        f"[{_m(qlo, '.1f')}, {_m(qhi, '.1f')}] (32 seeds)",
+    ]
+    # the superseded α = 0.5 figures, from check_t3_alg1_full.json (t interval: contains 0)
+    oi = old["cells"][2]
+    olo, ohi = _t99(oi, 64)
+    assert olo < 0 < ohi
+    quoted.append(f"gave {_num(oi['note'], 'ratio'):.3f}, +{oi['statistic']:.1f} "
+                  f"[{_m(olo, '.2f')}, {ohi:.2f}] (full; its quick-size run was not kept)")
+    for q in quoted:
+        assert q in text, q
+
+
+def test_alg1_figures_match_the_reports():
+    text = _text()
+    doc, quick = json.loads(REPORT.read_text()), _load("check_t3_alg1_quick.json")
+    assert not doc["options"].get("quick")
     al = _cells(doc, "alg1_neural_argmax")
-    assert al["verdict"] == "FAIL" and al["expected"] == "FAILS"
+    assert al["verdict"] == "FAIL" and al["expected"] == "FAILS" and al["seeds"] == 64
     printed, control = al["cells"]
     early, late = re.search(r"R/t = ([\d.]+) → ([\d.]+)", printed["note"]).groups()
     c_late = re.search(r"→ ([\d.]+)", control["note"]).group(1)
-    quoted += [f"from {float(early):.3f} at t = 20", f"to {float(late):.3f} at t = 2000",
-               f"increase {printed['statistic']:.3f} [{printed['lower']:.3f}, "
-               f"{printed['upper']:.3f}]",
-               f"goes from {float(early):.3f} to {float(c_late):.3f}"]
+    lo, hi = _t99(printed, 64)
+    qa = _cells(quick, "alg1_neural_argmax")
+    assert qa["verdict"] == "FAIL" and qa["seeds"] == 32
+    qp = qa["cells"][0]
+    qlo, qhi = _t99(qp, 32)
+    q_early, q_late = re.search(r"R/t = ([\d.]+) → ([\d.]+)", qp["note"]).groups()
+    from proofs_check import neural_runs
+
+    uniform = np.mean([max(r) - np.mean(r) for r in neural_runs.SPLIT_MEANS])
+    quoted = [f"at t = 2000 − at t = 20 = {printed['statistic']:.3f} [{lo:.3f}, {hi:.3f}] vs ≤ 0 "
+              f"(Student t 99%, 63 dof)",
+              f"α0 = α·p·ln T = {0.1 * 0.3 * math.log(2000):.2f}",
+              f"from {float(early):.3f} at t = 20", f"to {float(late):.3f} at t = 2000",
+              f"uniform play's {uniform:.3f}",
+              f"increase {printed['statistic']:.3f} [{lo:.3f}, {hi:.3f}] (Student t 99%, 64 "
+              f"seeds)",
+              f"goes from {float(early):.3f} to {float(c_late):.3f}",
+              f"{q_early} → {q_late}, increase {qp['statistic']:.3f} [{qlo:.3f}, {qhi:.3f}]"]
+    for q in quoted:
+        assert q in text, q
+
+
+def test_t4_quick_figures_match_the_report():
+    doc = _load("check_t4_quick.json")
+    text = _text()
+    assert doc["options"]["quick"] and doc["all_as_expected"]
+    t4 = _cells(doc, "t4_neural_bound")
+    assert t4["verdict"] == "VACUOUS" and t4["seeds"] == 32
+    learned, frozen = t4["cells"]
+    mant, exp = f"{learned['bound']:.1e}".split("e+")
+    sup = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
+    quoted = [f"mean R_T = {learned['statistic']:.1f} (paper's pseudo-regret, scaled rewards) "
+              f"against B(T) = {mant}·10{str(int(exp)).translate(sup)}, VACUOUS; fitted β = "
+              f"{_num(learned['note'], 'β_s ='):.3f} and log10 T* = "
+              f"{_num(learned['note'], 'log10 T* ='):.1f}",
+              f"has β = {_num(frozen['note'], 'β_s ='):.2f} and log10 T* = "
+              f"{_num(frozen['note'], 'log10 T* ='):.1f}"]
     for q in quoted:
         assert q in text, q
 

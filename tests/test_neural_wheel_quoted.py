@@ -151,3 +151,73 @@ def test_quoted_replication_on_fresh_seeds():
         quoted.append(f"{v}: {w[0]:.1f} s for δ = 0.5, then {min(w[1:]):.1f}–{max(w[1:]):.1f} s")
     for q in quoted:
         assert q in doc, q
+
+
+BASE = RESULTS / "wheel_sern_egreedy_greedy"
+BASE_POLICIES = ("sern", "egreedy", "greedy")
+
+
+def _base(delta, policy):
+    res = io.load_npz(BASE / f"d{delta}" / "results.npz")
+    return res[f"{policy}__regret_rb"][:, -1].astype(np.float64)
+
+
+def _base_interval(policy, d):
+    return _ratio_interval(_base(d, policy), _base(d, "uniform"))
+
+
+def test_quoted_sern_egreedy_greedy_rows_and_rankings():
+    """The sern / egreedy / greedy rows (one --deltas sweep on the same 20 seeds as the
+    Neural-Linear runs: Uniform's regret identical) and the ranking sentences built on them."""
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    for d in DELTAS:
+        cfg = io.load_json(BASE / f"d{d}" / "config.json")["experiment"]
+        assert float(cfg["delta"]) == float(d) and cfg["num_seeds"] == 20 and cfg["seed"] == 0
+        assert cfg["horizon"] == 1000 and cfg["hidden"] == [50] and cfg["update_every"] == 50
+        assert cfg["fit_steps"] == 20 and cfg["batch_size"] == 64 and cfg["alpha0"] == 0.1
+        assert tuple(cfg["policies"]) == BASE_POLICIES + ("uniform",)
+        np.testing.assert_array_equal(_base(d, "uniform"), _regret("arm_network", d, "uniform"))
+    for policy in BASE_POLICIES:
+        cells = [f"{r:.3f} [{lo:.3f}, {hi:.3f}]"
+                 for r, lo, hi in (_base_interval(policy, d) for d in DELTAS)]
+        line = f"| {policy} | " + " | ".join(cells) + " |"
+        assert line in doc, line
+    nl = {d: _ratio_interval(_regret("pooled_network", d), _regret("pooled_network", d,
+                                                                    "uniform")) for d in DELTAS}
+    base = {(p, d): _base_interval(p, d) for p in BASE_POLICIES for d in DELTAS}
+    # lowest of the four at δ ≤ 0.9, its interval below the three others'
+    for d in DELTAS[:3]:
+        assert all(nl[d][2] < base[p, d][1] for p in BASE_POLICIES), d
+    # at δ = 0.95 its interval overlaps ε-greedy's and greedy's
+    for p in ("egreedy", "greedy"):
+        assert nl["0.95"][2] > base[p, "0.95"][1] and base[p, "0.95"][2] > nl["0.95"][1]
+    # SERN second of the four at δ ≤ 0.7
+    for d in DELTAS[:2]:
+        order = sorted([("neural_lints", nl[d][0])] + [(p, base[p, d][0]) for p in
+                                                      BASE_POLICIES], key=lambda x: x[1])
+        assert order[1][0] == "sern", (d, order)
+    # SERN behind ε-greedy and greedy at δ ≥ 0.95, intervals apart
+    for d in DELTAS[3:]:
+        assert all(base["sern", d][1] > base[p, d][2] for p in ("egreedy", "greedy")), d
+    quoted = ["lowest ratio of the four methods at δ ≤ 0.9 ("
+              + " / ".join(f"{nl[d][0]:.3f}" for d in DELTAS[:3]) + ";",
+              f"({nl['0.95'][0]:.3f} against {base['egreedy', '0.95'][0]:.3f} and "
+              f"{base['greedy', '0.95'][0]:.3f})"]
+    for q in quoted:
+        assert q in doc, q
+
+
+def test_pooling_resolved_at_four():
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    a, b = "pooled_network", "arm_network"
+    diffs = stats.paired_differences([_regret(a, d) for d in DELTAS],
+                                     [_regret(b, d) for d in DELTAS], names=DELTAS)
+    u = [_regret(a, d, "uniform").mean() for d in DELTAS]
+    means = [r.mean / uu for r, uu in zip(diffs, u)]
+    assert all(m < 0 for m in means) and sum(r.resolved for r in diffs) == 4
+    assert not diffs[-1].resolved
+    last = diffs[-1]
+    q = (f"by {-max(means):.3f}–{-min(means):.3f} in point estimate at every δ, resolved at "
+         f"four (not at δ = 0.99: {last.mean / u[-1]:+.3f} [{last.lower / u[-1]:+.3f}, "
+         f"{last.upper / u[-1]:+.3f}])").replace("-0", "−0")
+    assert q in doc, q

@@ -177,3 +177,31 @@ def test_t4_full_size_figures_match_the_report():
               f"{_num(frozen['note'], 'log10 T* ='):.1f}"]
     for q in quoted:
         assert q in text, q
+
+
+def test_n1_a3_figures_match_the_report():
+    doc = _load("check_n1_a3_full.json")
+    text = _text()
+    assert doc["all_as_expected"] and not doc["options"]["quick"]
+    n1 = _cells(doc, "n1_neural_floor")
+    assert n1["verdict"] == "PASS" and n1["seeds"] == 64
+    floor = {c["label"]: c["statistic"] for c in n1["cells"]}
+    worst = min((v, k) for k, v in floor.items() if k.startswith("sern"))
+    assert worst[1] == "sern α=0.5 K=3: min π_t(a)/c"
+    assert all(v >= 1 for k, v in floor.items() if k.startswith("sern"))
+    a3 = _cells(doc, "a3_neural_error")
+    assert a3["verdict"] == "FAIL" and a3["expected"] == "FAILS" and a3["seeds"] == 64
+    learned = [c for c in a3["cells"] if not c["label"].startswith("control")]
+    frozen = [c for c in a3["cells"] if c["label"].startswith("control")]
+    assert all(c["lower"] > -0.5 for c in learned)  # each rejects slope ≤ −1/2
+    c0 = learned[0]
+    betas = [_num(c["note"], "E n+1) =") for c in learned]
+    fbetas = [_num(c["note"], "β_s =") for c in frozen]
+    quoted = [f"min π_t(a)/c = {worst[0]:.3f} ≥ 1",
+              f"context 0: slope {_m(c0['statistic'], '.3f')} [99% BCa {_m(c0['lower'], '.3f')}, "
+              f"{_m(c0['upper'], '.3f')}] vs ≤ −0.5",
+              "is " + ", ".join(_m(c["statistic"], ".2f") for c in learned) + " (four contexts)",
+              f"is {min(betas):.2f}–{max(betas):.2f}, but",
+              f"β_s {min(fbetas):.1f}–{max(fbetas):.1f} growing"]
+    for q in quoted:
+        assert q in text, q

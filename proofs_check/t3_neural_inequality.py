@@ -67,7 +67,9 @@ def evaluate(data, ctx):
         f"paper's form, β fitted: E[R_T − bound], K={k} α={ALPHA:g} T={horizon}",
         regret - bound, 0.0, "le", ctx.alpha,
         vacuous=bool(bound.mean() >= delta_max * horizon),  # then E[R_T − bound] ≤ 0 surely
-        note=f"R_T {regret.mean():.4g} vs bound {bound.mean():.4g} (β = {beta:.3f}: "
+        note=("mutated: the error terms below are dropped from the bound; " if ctx.mutate
+              else "")
+        + f"R_T {regret.mean():.4g} vs bound {bound.mean():.4g} (β = {beta:.3f}: "
              f"β Σ(N_a*+1)^-½ {best.mean():.4g} + β Σ(N_at+1)^-½ {chosen.mean():.4g} + "
              f"Σ 1{{â*≠a*}} {misid.mean():.4g} + α ln K·T {entropy * horizon:.4g}); "
              f"trivial bound Δ_max·T = {delta_max * horizon:.4g} (Δ_max {delta_max:.3f})")]
@@ -81,7 +83,8 @@ def evaluate(data, ctx):
         "pathwise: min over seeds and checkpoints of (Σ|err_{a*_t}| + Σ π|err| + α ln K·t "
         "− R_t(per-context)) / rhs", float(slack.min()), 0.0, "ge",
         vacuous=bool(np.all(rhs >= g_max * times[None, :])),
-        note=f"R_T(per-context) {per_ctx[:, -1].mean():.4g} vs rhs {rhs[:, -1].mean():.4g}; "
+        note=("mutated: rhs = α ln K·t alone; " if ctx.mutate else "")
+        + f"R_T(per-context) {per_ctx[:, -1].mean():.4g} vs rhs {rhs[:, -1].mean():.4g}; "
              f"trivial bound g·T = {g_max * horizon:.4g} (g {g_max:.3f}); rhs < g·t on "
              f"{100 * float(np.mean(rhs < g_max * times[None, :])):.1f}% of seed-checkpoints"))
     # ingredients, reported: the selection-bias ratio of the a_t term, and P(misid)

@@ -51,3 +51,27 @@ def test_quoted_benchmark_figures_match_the_files():
                "3 min 15 s wall", "peak RSS 1.6 GB"]
     for q in quoted:
         assert q in doc, q
+
+
+def test_pooled_default_idle_figures_match_the_files():
+    """docs/NEURAL.md's re-measurement under the pooled-σ² default (the lead's run, 1bdc7ed)."""
+    doc = " ".join((ROOT / "docs" / "NEURAL.md").read_text().split())
+    old = _load("neural_wheel_lints_2core_T5000_idle.json")
+    new = _load("neural_wheel_lints_2core_T5000_idle_pooled.json")
+    raw = (BENCH / "neural_wheel_lints_2core_T5000_idle_pooled.txt").read_text()
+    assert json.loads(raw.splitlines()[2]) == new and raw.splitlines()[0] == "1bdc7ed"
+    assert new["workload"] == old["workload"] and new["machine"]["cores_usable"] == 2
+    assert "Elapsed (wall clock) time (h:mm:ss or m:ss): 3:41.09" in raw
+    b = new["batched"]
+    for q in (f"{b['seed_rounds_per_s']:,.0f} seed-rounds/s, {b['seconds']:.1f} s wall",
+              f"{b['cpu_seconds']:.0f} CPU-s (compile {new['batched_compile_s']:.1f} s apart)",
+              f"Python loop {new['python_loop']['seed_rounds_per_s']:.0f} seed-rounds/s "
+              f"({new['speedup']:.0f}×)",
+              f"load average was {new['machine']['load_average_1min']:.1f} at the start",
+              f"{new['load_average_end'][0]:.1f} at the end",
+              f"mean regret at T {b['regret_rb_T_mean']:,.0f} against the per-arm learner's "
+              f"{old['batched']['regret_rb_T_mean']:,.0f}",
+              f"{100 * (b['seconds'] / old['batched']['seconds'] - 1):.0f} % "
+              f"({b['seconds']:.1f} s against {old['batched']['seconds']:.1f} s)",
+              "the whole command 3 min 41 s"):
+        assert q in doc, q

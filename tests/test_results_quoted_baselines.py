@@ -247,6 +247,28 @@ def test_paper_setting_with_all_learners_on_two_cores():
         assert s in text, s
 
 
+def test_paper_setting_with_all_learners_on_idle_cores():
+    """The lead's idle run of the same command: within the 10 minutes the issue asks."""
+    shared = json.loads((SRC / "paper_all_learners_2core.json").read_text())
+    d = json.loads((SRC / "paper_all_learners_2core_idle.json").read_text())
+    assert d["config"] == shared["config"]
+    assert d["command"].split("sern grasp learn")[1].split("--out")[0] == \
+        shared["command"].split("sern grasp learn")[1].split("--out")[0]
+    assert d["machine_at_end"]["cores_usable"] == 2 and d["seconds"] < 600
+    assert d["trial_counts"] == shared["trial_counts"]
+    m, s = d["elapsed"].split(":")
+    before = float(d["uptime_before_and_after"][0].split("load average:")[1].split(",")[0])
+    assert before < 2
+    text = " ".join(SECTION.split())
+    for q in (f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
+              f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)",
+              f"{round(d['user_cpu_s'])} s of user and {round(d['system_cpu_s'])} s",
+              f"peak RSS {d['max_rss_kb'] / 1e6:.1f} GB",
+              f"load average {before:.1f} at the start and {d['machine_at_end']['load_average_1m']:.1f} "
+              f"at the end"):
+        assert q in text, q
+
+
 def test_tuning_resolution():
     """The Tuning paragraph's 'how weakly': nothing resolved, p 0.055 (+5.3 points) for the
     UCB width, 4 to 869 seeds (median 18) for 80 % power."""
@@ -283,7 +305,8 @@ def test_every_number_in_the_prose_is_checked():
                "12.0", "4.6", "0.74", "1.75", "0.97", "0.94", "1.00", "1.08", "0.99", "1.11",
                "1.09", "1.03", "1.12", "2.34", "2.24", "2.43", "3.71", "3.50", "3.83", "2.20",
                "2.03", "10.77", "1.85", "4.91", "0.95", "11.86", "5.70", "3.39", "1.38",
-               "1.36", "1.55", "0.055", "+5.3", "3.0"}  # 1.5: the issue's goal (1.5x)
+               "1.36", "1.55", "0.055", "+5.3", "3.0",
+               "1.2", "2.0", "4.1"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
     assert found <= allowed, sorted(found - allowed)
 
 

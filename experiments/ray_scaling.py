@@ -26,6 +26,21 @@ Two ways to measure, both on a local Ray started before the clock (as a cluster 
   one-worker run, and the efficiencies ``E(N) = T1_est / (N T(N))``, with T(N) the measured
   wall time of the whole ``dataset.generate`` call, err low.
 
+* ``--mode d0-sampled``: the default D0 at ``--full-workers`` (default 8) workers over every
+  object, and one worker over a uniformly random sample of ``--sample-size`` objects drawn
+  without replacement by ``numpy.random.default_rng(--sample-seed)``, the runs one after the
+  other (never side by side), so each sees the host as the others left it. The one-worker time
+  of the whole D0 is estimated from the sample's own per-object task seconds,
+
+      T1_est = n_objects * mean_sample t1(i),   95 % Student-t interval over the sample
+                                                 (n - 1 dof, no finite-population factor:
+                                                 wider than needed)
+
+  which needs no figure of the full runs; a ratio estimate (Cochran's, from the residuals
+  t1(i) - R t8(i), R = sum_sample t1 / sum_sample t8) and the per-object slowdown t8(i)/t1(i)
+  are given beside it. T1_est counts task time only (no worker start, no driver work), so it
+  is below a real one-worker run's wall time and E(N) = T1_est / (N T(N)) errs low.
+
 Before the timed runs a one-object run fills the JAX compilation cache (``--cache``) that every
 worker reads. Each timed run writes its own directory; the shards of the objects that two runs
 share are compared by SHA-256 (the same bytes whatever N). Writes one JSON (command, machine,
@@ -239,14 +254,152 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
     return 0 if not mismatches else 1
 
 
+def _uptime() -> str:
+    import subprocess
+
+    try:
+        return subprocess.run(["uptime"], check=False, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError) as e:  # uptime missing: say so
+        return f"uptime failed: {e}"
+
+
+def sampled_estimate(t1_sample: dict, t_full: dict, num_objects: int,
+                     level: float = 0.95) -> dict:
+    """The one-worker time of all ``num_objects`` objects from a uniform random sample.
+
+    Args:
+      t1_sample: object shard name -> task seconds on the lone worker (the sample).
+      t_full: shard name -> task seconds of every object in a full run (N workers).
+      num_objects: the population size (D0's objects).
+
+    Returns: the expansion estimate ``num_objects * mean(t1)`` with its Student-t interval,
+    the ratio estimate ``R * sum(t_full)`` (R = sum_sample t1 / sum_sample t_full; interval
+    from the residuals t1 - R t_full, n - 1 dof), and the per-object slowdown of the full
+    run's tasks, t_full / t1, with its Student-t interval.
+    """
+    import numpy as np
+
+    from sern_jax import stats
+
+    names = sorted(t1_sample)
+    t1 = np.array([t1_sample[n] for n in names], np.float64)
+    tf = np.array([t_full[n] for n in names], np.float64)
+    n = len(names)
+    expansion = stats.t_interval(t1, level)
+    ratio = t1.sum() / tf.sum()
+    residual_sd = float(np.std(t1 - ratio * tf, ddof=1))
+    ratio_half = num_objects * stats.t_half_width(residual_sd, n, level)
+    ratio_est = ratio * sum(t_full.values())
+    slow = stats.t_interval(tf / t1, level)
+    return {
+        "level": level, "sample_size": n, "population": num_objects,
+        "t1_mean_task_seconds": expansion.mean, "t1_sd_task_seconds": expansion.sd,
+        "t1_estimate_seconds": num_objects * expansion.mean,
+        "t1_estimate_interval": [num_objects * expansion.lower, num_objects * expansion.upper],
+        "t1_ratio_estimate_seconds": ratio_est,
+        "t1_ratio_estimate_interval": [ratio_est - ratio_half, ratio_est + ratio_half],
+        "full_over_one_task_ratio_mean": slow.mean,
+        "full_over_one_task_ratio_interval": [slow.lower, slow.upper],
+    }
+
+
+def _d0_sampled(args, argv, cache: str, started: float) -> int:
+    """``--mode d0-sampled``: the full runs and the one-worker random sample, one after the
+    other on one host."""
+    import numpy as np
+
+    from sern_jax import io
+
+    full = [int(w) for w in args.full_workers.split(",") if w]
+    if not full or any(w < 2 for w in full):
+        raise SystemExit("--full-workers: worker counts >= 2")
+    if not 2 <= args.sample_size <= args.objects:
+        raise SystemExit(f"--sample-size: 2 .. --objects ({args.objects})")
+    sample = sorted(int(i) for i in np.random.default_rng(args.sample_seed).choice(
+        args.objects, args.sample_size, replace=False))
+    warm = _run(1, 1, args.poses, args.out / "warmup", cache)  # fills the compile cache
+    print(f"warm-up (1 object, fills the compile cache): {warm['seconds']:.1f} s", flush=True)
+    runs = []
+    plan = [(1, sample)] + [(n, None) for n in full]
+    for n, chosen in plan:
+        up, load = _uptime(), list(os.getloadavg())
+        r = _run(args.objects, n, args.poses,
+                 args.out / (f"workers{n}" + ("-sample" if chosen else "")), cache,
+                 sample=chosen)
+        r["uptime_before"], r["load_average_before"] = up, load
+        r["uptime_after"], r["load_average_after"] = _uptime(), list(os.getloadavg())
+        runs.append(r)
+        print(f"N={n} over {r['objects']} objects: {r['seconds']:.1f} s (task seconds "
+              f"{r['task_seconds_sum']:.1f}); before: {r['uptime_before']}; after: "
+              f"{r['uptime_after']}", flush=True)
+    one = runs[0]
+    largest = max(runs[1:], key=lambda r: r["workers"])
+    est = sampled_estimate(one["task_seconds"], largest["task_seconds"], args.objects)
+    for r in runs[1:]:
+        r["efficiency"] = est["t1_estimate_seconds"] / (r["workers"] * r["seconds"])
+        r["efficiency_interval"] = [t / (r["workers"] * r["seconds"])
+                                    for t in est["t1_estimate_interval"]]
+        r["efficiency_ratio_estimate"] = (est["t1_ratio_estimate_seconds"]
+                                          / (r["workers"] * r["seconds"]))
+    for r in runs:
+        r["objects_per_second"] = r["objects"] / r["seconds"]
+    mismatches = sorted({n for a in runs for b in runs for n, h in a["shard_sha256"].items()
+                         if n in b["shard_sha256"] and b["shard_sha256"][n] != h})
+    doc = {
+        "what": ("the default D0's size (objects x poses, one object per shard, seed 0) on "
+                 "local Rays of pinned one-core workers, one run after the other: one worker "
+                 "over a uniformly random sample of objects, then every object at each of "
+                 "--full-workers"),
+        "mode": "d0-sampled",
+        "sample_seed": args.sample_seed,
+        "sample_rule": ("sorted(numpy.random.default_rng(sample_seed).choice(objects, "
+                        "sample_size, replace=False))"),
+        "efficiency_definition": (
+            "E(N) = T1_est / (N T(N)); T(N) the wall seconds of the whole dataset.generate "
+            "call over every object (worker start-up included, Ray start excluded); T1_est = "
+            "objects * mean task seconds of the one-worker sample, 95 % Student-t interval "
+            "(n - 1 dof); task time only, so E errs low"),
+        **est,
+        "command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
+                             *(argv if argv is not None else sys.argv[1:])]),
+        "machine": io.machine(),
+        "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
+        "versions": io.run_metadata()["versions"],
+        "ray_version": __import__("ray").__version__,
+        "warmup_seconds": warm["seconds"],
+        "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs],
+        "shards_identical_across_runs": not mismatches,
+        "shard_sha256": largest["shard_sha256"],
+        "total_seconds": time.perf_counter() - started,
+    }
+    for r in runs[1:]:
+        print(f"N={r['workers']}: {r['seconds']:.1f} s, efficiency {r['efficiency']:.3f} "
+              f"[{r['efficiency_interval'][0]:.3f}, {r['efficiency_interval'][1]:.3f}] "
+              f"(ratio estimate {r['efficiency_ratio_estimate']:.3f})", flush=True)
+    print(f"T1 estimate {est['t1_estimate_seconds']:.1f} s "
+          f"[{est['t1_estimate_interval'][0]:.1f}, {est['t1_estimate_interval'][1]:.1f}]; "
+          f"full/one task ratio {est['full_over_one_task_ratio_mean']:.3f}; shards identical "
+          f"across runs: {not mismatches}", flush=True)
+    if args.json_out:
+        io.save_json(args.json_out, doc)
+        print(f"wrote {args.json_out}")
+    return 0 if not mismatches else 1
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--workers", default="1,4,8", help="comma list of worker counts")
-    p.add_argument("--mode", choices=("weak", "strong", "default-d0"), default="weak")
+    p.add_argument("--mode", choices=("weak", "strong", "default-d0", "d0-sampled"),
+                   default="weak")
     p.add_argument("--full-workers", default="8,4",
                    help="default-d0: worker counts that run every object")
     p.add_argument("--sample-every", type=int, default=8,
                    help="default-d0: the one-worker run takes every k-th object")
+    p.add_argument("--sample-size", type=int, default=24,
+                   help="d0-sampled: objects in the one-worker run's random sample")
+    p.add_argument("--sample-seed", type=int, default=20261124,
+                   help="d0-sampled: numpy.random.default_rng seed of the sample")
     for hidden in ("--child-json", "--child-out"):
         p.add_argument(hidden, default=None, help=argparse.SUPPRESS)
     p.add_argument("--child-workers", type=int, default=1, help=argparse.SUPPRESS)
@@ -264,7 +417,7 @@ def main(argv=None) -> int:
     p.add_argument("--json-out", type=Path, default=None)
     args = p.parse_args(argv)
     if args.objects is None:
-        args.objects = 200 if args.mode == "default-d0" else 16
+        args.objects = 200 if args.mode in ("default-d0", "d0-sampled") else 16
     if args.child_json:
         args.child_out = Path(args.child_out)
         return _child(args)
@@ -277,6 +430,8 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     if args.mode == "default-d0":
         return _default_d0(args, argv, cache, started)
+    if args.mode == "d0-sampled":
+        return _d0_sampled(args, argv, cache, started)
     warm = _run(1, 1, args.poses, args.out / "warmup", cache)  # fills the compile cache
     print(f"warm-up (1 object, fills the compile cache): {warm['seconds']:.1f} s", flush=True)
     runs = []

@@ -618,13 +618,25 @@ def run(
         log(f"resuming {out_dir} at round {start_round}")
     out_dir.mkdir(parents=True, exist_ok=True)
 
+    # Every (object, seed)'s batch of contexts is made in a thread of its own (MuJoCo's
+    # settling and ray casting and JAX's sampler release the GIL; each batch has its own
+    # MjData and keys, the models are only read), so the batches of a round use the cores
+    # instead of one. The threads' name starts with "sern-context", so each batch settles its
+    # poses in its own thread (context._resting_poses) rather than in a nested pool.
+    batches = concurrent.futures.ThreadPoolExecutor(
+        max(1, min(num_o * num_s, context_lib.context_threads())),
+        thread_name_prefix="sern-context-batch")
+
+    def contexts_of(stream, r, num):
+        jobs = [[batches.submit(_contexts, _stream(keys_os[o][s], stream, r), specs[o], num,
+                                models[o], context_config) for s in range(num_s)]
+                for o in range(num_o)]
+        return _stack_contexts([[job.result() for job in row] for row in jobs])
+
     # The fixed low-variance evaluation poses of each (object, seed).
     lowvar = None
     if config.eval_poses:
-        lowvar = _stack_contexts(
-            [[_contexts(_stream(keys_os[o][s], LOWVAR_CONTEXT, 0), specs[o], config.eval_poses,
-                        models[o], context_config) for s in range(num_s)]
-             for o in range(num_o)])
+        lowvar = contexts_of(LOWVAR_CONTEXT, 0, config.eval_poses)
         lowvar = lowvar + (crops_fn(lowvar[1], lowvar[2]),)
 
     from tqdm.auto import tqdm
@@ -645,10 +657,7 @@ def run(
     def make_contexts(kind, r):
         stream, num = {"explore": (EXPLORE_CONTEXT, num_e),
                        "eval": (EVAL_CONTEXT, config.evaluate)}[kind]
-        return _stack_contexts(
-            [[_contexts(_stream(keys_os[o][s], stream, r), specs[o], num, models[o],
-                        context_config) for s in range(num_s)]
-             for o in range(num_o)])  # poses [O, S, N, 7]
+        return contexts_of(stream, r, num)  # poses [O, S, N, 7]
 
     ahead = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     pending = {}
@@ -785,6 +794,7 @@ def run(
                 + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
     bar.close()
     ahead.shutdown(wait=False, cancel_futures=True)
+    batches.shutdown(wait=False, cancel_futures=True)
     rows = table_rows(names, config.policies, results.paper_eval,
                       results.lowvar_eval if config.eval_poses else None,
                       results.pseudo_regret if config.regret_trials else None)

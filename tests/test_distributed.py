@@ -233,7 +233,6 @@ def test_cluster_doc_quotes_the_default_d0_run():
         e = t1_est / (r["workers"] * r["seconds"])
         assert r["efficiency"] == pytest.approx(e)
         assert f"{r['seconds']:.1f} s" in doc and f"**{e:.2f}**" in doc, r["workers"]
-        assert f"{e:.2f}" in readme
         # the other reading: T1 = the 4-worker run's task seconds (every object, measured)
         low = sum(four["task_seconds"].values()) / (r["workers"] * r["seconds"])
         assert f"{low:.2f}" in doc
@@ -244,10 +243,14 @@ def test_cluster_doc_quotes_the_default_d0_run():
     flat_doc, flat_readme = " ".join(doc.split()), " ".join(readme.split())
     assert (f"{faster:.0f} % faster per task (T1 = {edge:.0f} s), E(8) would be 0.80"
             in flat_doc)
-    assert f"{faster:.0f} % faster per task would put E(8) at 0.80" in flat_readme
-    for text in (flat_doc, flat_readme):
-        assert "bias of unknown sign" in text and "loaded-host estimate only" in text
-    assert "errs low" not in flat_doc and "either reading of T1" not in flat_doc
+    # the README quotes this run only as the earlier, loaded-host figure
+    assert (f"loaded-host estimate ({eight['efficiency']:.2f}, the one-worker sample beside "
+            "12 busy workers)" in flat_readme)
+    assert f"4 workers were measured only then ({four['seconds']:.0f} s)" in flat_readme
+    assert "bias of unknown sign" in flat_doc and "loaded-host estimate only" in flat_doc
+    earlier = flat_doc.split("## Earlier: D0 at its default size on a loaded host")[1]
+    earlier = earlier.split("## ")[0]  # that run's own section: its bias has no known sign
+    assert "errs low" not in earlier and "either reading of T1" not in flat_doc
     assert "not measured side by side" in flat_doc
     assert f"{t1_est:.0f} s" in doc and f"{t1:.1f} s" in doc and f"{one['seconds']:.1f} s" in doc
     assert f"{sum(four['task_seconds'].values()):.0f} s" in doc
@@ -255,6 +258,87 @@ def test_cluster_doc_quotes_the_default_d0_run():
     before = data["load_average_1m_5m_15m_before_and_after"][0][0]
     after = data["load_average_1m_5m_15m_before_and_after"][1][0]
     assert f"{before:.1f}" in doc and f"{after:.1f}" in doc
+
+
+def test_cluster_doc_quotes_the_sampled_d0_run():
+    """docs/CLUSTER.md's and the README's idle-host D0 figures: 8 workers over all 200
+    objects, one worker alone over a seeded random sample, T1 = 200 x the sample's mean task
+    time with a Student-t interval; every figure recomputed here from the per-object task
+    seconds in the committed JSON (not from its summary fields)."""
+    import numpy as np
+
+    from experiments import ray_scaling
+    from sern_jax import stats
+
+    doc = " ".join((ROOT / "docs" / "CLUSTER.md").read_text().split())
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    data = json.loads((ROOT / "experiments" / "results" / "ray_scaling" /
+                       "d0_sampled_h100host.json").read_text())
+    assert data["mode"] == "d0-sampled" and data["shards_identical_across_runs"]
+    assert data["machine"]["cpu_count"] == 16 and data["env"]["JAX_PLATFORMS"] == "cpu"
+    one, eight = data["runs"]
+    assert (one["workers"], eight["workers"]) == (1, 8)
+    # the sample is the stated rule applied to the stated seed: uniform, without replacement
+    seed, n = data["sample_seed"], data["sample_size"]
+    sample = sorted(int(i) for i in np.random.default_rng(seed).choice(200, n, replace=False))
+    assert one["sample"] == sample and len(one["task_seconds"]) == n == 24
+    assert f"default_rng({seed})" in doc and f"sample of {n} of the 200 objects" in doc
+    assert ", ".join(map(str, sample)) in doc
+    assert eight["objects"] == 200 and len(eight["task_seconds"]) == 200
+    assert eight["labelled_grasps"] == 204_360 and f"{eight['labelled_grasps']:,}" in doc
+    assert set(one["task_seconds"]) < set(eight["task_seconds"])
+    # T1 = 200 x mean of the sample's task seconds, Student t (n - 1 dof) over the objects
+    t1 = np.array([one["task_seconds"][k] for k in sorted(one["task_seconds"])])
+    ci = stats.t_interval(t1, 0.95)
+    t1_est, lo, hi = 200 * ci.mean, 200 * ci.lower, 200 * ci.upper
+    assert data["t1_estimate_seconds"] == pytest.approx(t1_est)
+    assert data["t1_estimate_interval"] == pytest.approx([lo, hi])
+    t8 = eight["seconds"]
+    e, e_lo, e_hi = (x / (8 * t8) for x in (t1_est, lo, hi))
+    assert eight["efficiency"] == pytest.approx(e)
+    assert e_lo >= 0.8  # the issue's goal, at the interval's lower end
+    quoted = f"E(8) = {e:.2f} [{e_lo:.2f}, {e_hi:.2f}]"
+    assert f"**{quoted}**" in readme
+    assert f"**E(8) = {e:.2f}, 95 % interval [{e_lo:.2f}, {e_hi:.2f}]**" in doc
+    assert f"(8 × {t8:.1f} s) = {e:.2f} [{e_lo:.2f}, {e_hi:.2f}]" in doc
+    for text in (doc, readme):
+        assert f"{t1_est:.0f} s [{lo:.0f}, {hi:.0f}]" in text
+    assert f"200 × {ci.mean:.2f} s (SD {ci.sd:.2f} s over {n} objects)" in doc
+    assert f"8 workers {t8:.1f} s" in readme and f"**{t8:.1f} s**" in doc
+    assert f"{one['seconds']:.1f} s" in doc and f"{one['task_seconds_sum']:.1f} s" in doc
+    assert f"{eight['task_seconds_sum']:.1f} s" in doc
+    assert f"{one['seconds'] - one['task_seconds_sum']:.1f} s" in doc
+    # the ratio estimate (Cochran): R = sum t1 / sum t8 over the sample, residual sd
+    t8s = np.array([eight["task_seconds"][k] for k in sorted(one["task_seconds"])])
+    ratio = t1.sum() / t8s.sum()
+    est = ratio * sum(eight["task_seconds"].values())
+    half = 200 * stats.t_half_width(np.std(t1 - ratio * t8s, ddof=1), n, 0.95)
+    assert data["t1_ratio_estimate_seconds"] == pytest.approx(est)
+    r_e = [x / (8 * t8) for x in (est, est - half, est + half)]
+    assert (f"T1 = {est:.0f} s [{est - half:.0f}, {est + half:.0f}], E(8) = {r_e[0]:.2f} "
+            f"[{r_e[1]:.2f}, {r_e[2]:.2f}]") in doc
+    assert f"ratio estimate {r_e[0]:.2f} [{r_e[1]:.2f}, {r_e[2]:.2f}]" in readme
+    slow = stats.t_interval(t8s / t1, 0.95)
+    slow_q = f"{slow.mean:.3f} [{slow.lower:.3f}, {slow.upper:.3f}]"
+    assert slow_q in doc and slow_q in readme
+    assert slow.lower < 1 < slow.upper  # "no slowdown resolved" is what the doc says
+    assert "no slowdown from running eight at once is resolved" in doc
+    busy = eight["task_seconds_sum"] / (8 * t8)
+    assert f"= {busy:.2f} of the wall time" in doc
+    # load and CPU time as quoted; one thread per core (lscpu in the context file)
+    for r in (one, eight):
+        assert f"{r['load_average_before'][0]:.2f} → {r['load_average_after'][0]:.2f}" in doc
+        assert r["task_cpu_seconds_sum"] == pytest.approx(r["task_seconds_sum"], rel=0.002)
+        assert f"{r['task_cpu_seconds_sum']:.1f} of {r['task_seconds_sum']:.1f} s" in doc
+    context = (ROOT / "experiments" / "results" / "ray_scaling" /
+               "d0_sampled_h100host_context.txt").read_text()
+    assert "Thread(s) per core:                      1" in context
+    assert "load average: 0.15" in context and "load average 0.15" in doc
+    # the command's own estimator agrees with these recomputations
+    again = ray_scaling.sampled_estimate(one["task_seconds"], eight["task_seconds"], 200)
+    assert again["t1_estimate_interval"] == pytest.approx([lo, hi])
+    assert again["full_over_one_task_ratio_interval"] == pytest.approx(
+        [slow.lower, slow.upper])
 
 
 def test_no_cluster_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):

@@ -62,7 +62,7 @@ CHECK = fw.Check(
     configuration="addhalf, SERN α = 0.02 (lock-in), K = 2, r ∈ {(0.9,0.5), (0.6,0.4)}, "
                   "T = 2000; plus the exact fixed-n maximum",
     statistic="per-seed Σ_t |err_{a*}| − β Σ_t (N_{a*}(t−1)+1)^{−1/2}",
-    bound="E ≤ 0 (CLT, Holm over the two instances)",
+    bound="E ≤ 0 (Student t, n − 1 dof, Holm over the two instances)",
     expected=fw.FAILS,
     simulate=simulate,
     evaluate=evaluate,

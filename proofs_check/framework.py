@@ -7,6 +7,10 @@ counterexample, which must be rejected). It is split into
 * ``simulate(ctx) -> dict``: the expensive part (engine runs, exact sums), cached per size, and
 * ``evaluate(data, ctx) -> CheckResult``: cheap statistics against the bound.
 
+Means over seeds (``mean_cell``, ``equal_cell``) take Student's t with n − 1 degrees of
+freedom, interval and p-value alike (the project's rule for intervals over seeds); ratios and
+slopes take a BCa bootstrap (``bootstrap_cell``), tail probabilities Clopper–Pearson.
+
 ``ctx.mutate`` swaps in a deliberately wrong bound (described by ``Check.mutation``), so the
 tests can show that every check family is able to fail on the same data.
 
@@ -80,6 +84,8 @@ class Cell:
     info_only: bool = False  # reported, not part of the verdict
     note: str = ""
     verdict: str = ""
+    n: int = 0  # seeds behind a mean or equality cell (0: not a mean over seeds)
+    se: float = math.nan  # its standard error sd/√n (ddof 1): intervals recomputable from the report
 
     def slack(self) -> float:
         """Relative margin in the claim's favour (negative = on the violating side)."""
@@ -166,23 +172,35 @@ def exact_cell(label, statistic, bound, direction="ge", vacuous=False, **kw) -> 
     return Cell(label, s, b, direction, exact=True, violated=violated, vacuous=vacuous, **kw)
 
 
+def _seed_values(values) -> np.ndarray:
+    x = np.asarray(values, dtype=np.float64).ravel()
+    if x.size < 2:
+        raise ValueError(f"need at least 2 per-seed values for a t interval, got {x.size}")
+    return x
+
+
 def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False,
               value_range=None, **kw) -> Cell:
-    """CLT test of E[X] <= bound ('le') or >= bound ('ge') from per-seed values [S].
+    """One-sided Student-t test (n − 1 degrees of freedom) of E[X] <= bound ('le') or
+    >= bound ('ge') from per-seed values [S].
+
+    The interval stored is the tested end one-sided at 1 − alpha (``stats.t_interval`` at
+    1 − 2·alpha) and the other end two-sided at 1 − alpha; the p-value is the matching
+    one-sided t-test (``stats.t_pvalue``), so the interval excludes the bound iff p <= alpha
+    (before Holm), and ``detectable`` is the t-test's 80%-power excess.
 
     ``value_range=(lo, hi)``: the values' a-priori range. When every seed gives the same value
-    v the CLT has no variance to work with; then (if the range is known) the test is exact:
+    v there is no variance to work with; then (if the range is known) the test is exact:
     if a fraction q of the population differs from v, all S seeds equal v with probability
     (1-q)^S, and a difference moves the mean by at most (hi - v) or (v - lo). Without a range
     the statistic is treated as deterministic (e.g. an exact oracle).
     """
     from sern_jax import stats
 
-    x = np.asarray(values, dtype=np.float64).ravel()
-    side = "lower" if direction == "le" else "upper"
-    ci = stats.mean_ci(x, 1.0 - alpha, side="two")
-    p = stats.mean_pvalue(ci.mean, ci.se, float(bound), direction)
-    one = stats.mean_ci(x, 1.0 - alpha, side=side)
+    x = _seed_values(values)
+    ci = stats.t_interval(x, 1.0 - alpha)  # two-sided 1 − alpha
+    one = stats.t_interval(x, 1.0 - 2.0 * alpha)  # its ends are one-sided 1 − alpha bounds
+    p = stats.t_pvalue(ci.mean, ci.se, x.size, float(bound), direction)
     lo, hi = (one.lower, ci.upper) if direction == "le" else (ci.lower, one.upper)
     note_extra = ""
     if ci.se == 0.0 and value_range is not None:
@@ -199,27 +217,31 @@ def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False,
         else:
             p = float((1.0 - min(1.0, gap / room)) ** n)
         note_extra = "all seeds equal: exact zero-variance test"
-    exc = stats.mean_detectable_excess(ci.se, alpha)
+    exc = stats.t_detectable_excess(ci.se, x.size, alpha)
     det = float(bound) + exc if direction == "le" else float(bound) - exc
     if note_extra:
         kw["note"] = (kw.get("note", "") + "; " + note_extra).lstrip("; ")
     return Cell(label, ci.mean, float(bound), direction, lower=lo, upper=hi, pvalue=p,
-                detectable=det, vacuous=vacuous, **kw)
+                detectable=det, vacuous=vacuous, n=x.size, se=ci.se, **kw)
 
 
 def equal_cell(label, values, target, alpha=0.01, **kw) -> Cell:
-    """Two-sided CLT test of E[X] = target (tightness checks)."""
+    """Two-sided Student-t test (n − 1 degrees of freedom) of E[X] = target (tightness
+    checks), with the two-sided 1 − alpha t interval."""
+    from scipy.stats import t as student_t
+
     from sern_jax import stats
 
-    x = np.asarray(values, dtype=np.float64).ravel()
-    ci = stats.mean_ci(x, 1.0 - alpha, side="two")
+    x = _seed_values(values)
+    ci = stats.t_interval(x, 1.0 - alpha)
     if ci.se > 0:
-        p = float(2.0 * norm.sf(abs(ci.mean - target) / ci.se))
+        p = float(2.0 * student_t.sf(abs(ci.mean - target) / ci.se, x.size - 1))
     else:
         p = 0.0 if abs(ci.mean - target) > REL_TOL * abs(target) else 1.0
     return Cell(label, ci.mean, float(target), "eq", lower=ci.lower, upper=ci.upper,
-                pvalue=min(1.0, p), detectable=stats.mean_detectable_excess(ci.se, alpha / 2),
-                **kw)
+                pvalue=min(1.0, p),
+                detectable=stats.t_detectable_excess(ci.se, x.size, alpha / 2), n=x.size,
+                se=ci.se, **kw)
 
 
 def tail_cell(label, k, n, bound, alpha=0.01, **kw) -> Cell:

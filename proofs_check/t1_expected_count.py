@@ -33,7 +33,7 @@ CHECK = fw.Check(
     name="t1_expected_count",
     claim="Thm 1: E[N_a(t)] ≥ ct, c = e^{−1/α}/K",
     configuration="the runs of t1_minprob_pathwise; checkpoints t ≥ 10; least-pulled arm",
-    statistic="mean N_a(t) over seeds (CLT, upper one-sided 99% bound, Holm over cells)",
+    statistic="mean N_a(t) over seeds (Student t, upper one-sided 99% bound, Holm over cells)",
     bound="ct (VACUOUS where ct < 1)",
     expected=fw.HOLDS,
     simulate=simulate,

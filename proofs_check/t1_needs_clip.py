@@ -68,7 +68,7 @@ CHECK = fw.Check(
     claim="Thm 1 without its unstated hypothesis r̂ ∈ [0,1]: E N_a(t) ≥ ct for any estimator",
     configuration="unclipped 'track-low' adversarial oracle, K = 2, r = (1, 0), α = 1, β = 0.99, "
                   "ε = 0.01, t ∈ [10, 113] (own scan, see module docstring)",
-    statistic="mean N_2(t) (CLT, Holm), and min_t π_t(2)",
+    statistic="mean N_2(t) (Student t, Holm), and min_t π_t(2)",
     bound="ct, c = e^{−1}/2 = 0.184",
     expected=fw.FAILS,
     simulate=simulate,

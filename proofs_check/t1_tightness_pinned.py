@@ -48,7 +48,7 @@ CHECK = fw.Check(
           "E N_a(t) = π_min t exactly",
     configuration="pinned estimator (r̂ = 0 for the tracked arm, 1 for the others), K ∈ "
                   "{2,10,64} (quick {2,10}), α ∈ {0.3,1,10}, T = 2000 (quick 500)",
-    statistic="mean N_a(T)/(cT) (two-sided CLT 99%) and A_a(T)/(π_min T) (exact)",
+    statistic="mean N_a(T)/(cT) (two-sided Student t 99%) and A_a(T)/(π_min T) (exact)",
     bound="= π_min/c",
     expected=fw.HOLDS,
     simulate=simulate,

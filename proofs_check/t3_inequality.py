@@ -40,7 +40,7 @@ CHECK = fw.Check(
                   "oracles, ½+10⁻³ for addhalf (fixed-n A3), max|1−2r|·q_c for flip (q_c = 0.49)",
     statistic="per-seed D = R_T − bound_i (paper's regret, Rao–Blackwellised; the a_t term "
               "as Σ_τ Σ_a π_τ(a)(N_a+1)^{−1/2}, same expectation; ties count as misidentified)",
-    bound="E[D] ≤ 0 (CLT upper 99%, Holm over configurations)",
+    bound="E[D] ≤ 0 (Student t upper 99%, Holm over configurations)",
     expected=fw.HOLDS,
     simulate=simulate,
     evaluate=evaluate,

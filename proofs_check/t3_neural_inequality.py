@@ -109,7 +109,7 @@ CHECK = fw.Check(
     statistic="per-seed D = R_T − bound (paper's regret, Rao–Blackwellised; a* = argmax_a "
               "E_s r_a(s), â* from the acting network's mean over the 4 contexts); pathwise: "
               "the per-context regret against its assumption-free bound at every checkpoint",
-    bound="E[D] ≤ 0 (framework.mean_cell: normal (z) 99% interval, Holm); pathwise ≥ 0 on "
+    bound="E[D] ≤ 0 (framework.mean_cell: Student t 99% interval, Holm); pathwise ≥ 0 on "
           "every seed and checkpoint; VACUOUS where the mean bound ≥ Δ_max·T (paper's form) or "
           "rhs ≥ g·t everywhere (pathwise)",
     expected=fw.HOLDS,

@@ -34,7 +34,7 @@ CHECK = fw.Check(
     configuration="the runs of t3_inequality; tested: adv, rademacher; gauss/flip/addhalf "
                   "reported separately",
     statistic="per-seed D = R_T − (bound without Σ P(misid))",
-    bound="E[D] ≤ 0 (CLT upper 99%, Holm)",
+    bound="E[D] ≤ 0 (Student t upper 99%, Holm)",
     expected=fw.HOLDS,
     simulate=simulate,
     evaluate=evaluate,

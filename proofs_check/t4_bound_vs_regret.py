@@ -106,7 +106,7 @@ CHECK = fw.Check(
                   "× K ∈ {2,10} × Δ2 ∈ {0.2,0.5} × α0 ∈ {1,2} × p ∈ {0.1,0.3}; quick: adv, "
                   "K = 2, β = 0.1, Δ2 = 0.2, α0 = 1, p ∈ {0.1,0.3}; means 0.9, 0.9−Δ2, rest "
                   "spread below",
-    statistic="mean R_T (paper's pseudo-regret, Rao–Blackwellised), CLT upper 99%",
+    statistic="mean R_T (paper's pseudo-regret, Rao–Blackwellised), Student t upper 99%",
     bound="B(T) in log-space; VACUOUS where B(T) ≥ Δ_max·T",
     expected=fw.HOLDS,
     simulate=simulate,

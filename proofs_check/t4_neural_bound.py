@@ -60,8 +60,8 @@ CHECK = fw.Check(
     configuration="the runs of a3_neural_error: finite problem (M = 4, d = 4, K = 3, "
                   "Δ2 = 0.2), MLP [16], sern α = 0.5 = α0/ln(T^p) with p = 0.3; 64 seeds × "
                   "T = 2000 (quick: 32 × 1000); control: the network frozen at θ0",
-    statistic="mean R_T (paper's pseudo-regret, Rao–Blackwellised, scaled rewards), CLT "
-              "upper 99%",
+    statistic="mean R_T (paper's pseudo-regret, Rao–Blackwellised, scaled rewards), "
+              "Student t upper 99%",
     bound="B(T) in log-space with the fitted β; VACUOUS where B(T) ≥ T",
     expected=fw.HOLDS,
     simulate=simulate,

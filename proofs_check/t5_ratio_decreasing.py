@@ -89,7 +89,7 @@ CHECK = fw.Check(
     configuration="K = 2, r = (½+Δ/2, ½−Δ/2), separate run per T; full: {exact, adv β = 0.1, "
                   "addhalf} × p ∈ {0.1,0.3} × Δ ∈ {0.05,0.2,0.5}, T ∈ {10²,…,10⁵}; quick: "
                   "{exact, addhalf}, p = 0.3, Δ = 0.2, T ∈ {10²,10³,10⁴}",
-    statistic="paired per-seed differences of R_T/T between consecutive T (CLT); OLS slope of "
+    statistic="paired per-seed differences of R_T/T between consecutive T (Student t); OLS slope of "
               "log E R_T on log T (BCa bootstrap); exact oracle vs ΔT/(1+T^{pΔ/α0})",
     bound="differences ≤ 0; slope ≤ 1; closed form to 1e−9 relative",
     expected=fw.HOLDS,

@@ -13,13 +13,14 @@ the power statements (smallest detectable excess / probability). The methodology
 * a family of cells is corrected with Holm;
 * every test reports the smallest violation it could detect.
 
-Means over a handful of seeds (the grasp experiments: 5 to 20 seeds) take Student's t with
-n − 1 degrees of freedom (``t_interval``, ``paired_differences``), never a normal quantile:
-at n = 5 the normal interval is 29 % too narrow (t_{0.975, 4} = 2.776). ``mean_ci`` keeps the
-normal quantile: it serves the theory checks (``proofs_check``), whose thousands of seeds make
-t and z agree to the third digit and whose p-values (``mean_pvalue``) use the same normal
-approximation; changing one without the other would make a check's interval and its verdict
-disagree.
+Every interval over seeds takes Student's t with n − 1 degrees of freedom (``t_interval``,
+``paired_differences``), never a normal quantile: at n = 5 the normal interval is 29 % too
+narrow (t_{0.975, 4} = 2.776). The theory checks (``proofs_check.framework.mean_cell``) use the
+same t interval, with the matching one-sided t-test p-value (``t_pvalue``) and power statement
+(``t_detectable_excess``), so a check's interval and its verdict agree. (The normal-quantile
+``mean_ci`` that the checks used before is gone: no caller was an interval over anything but
+seeds.) ``mean_pvalue`` and ``mean_detectable_excess`` keep the normal form for a bootstrap
+cell, whose spread is fitted by a normal, not estimated from n − 1 degrees of freedom.
 
 Estimates of a maximum (the best candidate of a context, the regret oracle's argmax) are
 valued on trials independent of those that chose it (``independent_best``,
@@ -38,8 +39,6 @@ from scipy import stats as sps
 __all__ = [
     "clopper_pearson",
     "tail_pvalue",
-    "MeanCI",
-    "mean_ci",
     "SeedInterval",
     "t_interval",
     "t_half_width",
@@ -48,9 +47,11 @@ __all__ = [
     "independent_best",
     "oracle_regret",
     "mean_pvalue",
+    "t_pvalue",
     "bootstrap_ci",
     "holm",
     "mean_detectable_excess",
+    "t_detectable_excess",
     "tail_critical_count",
     "tail_detectable_prob",
 ]
@@ -102,39 +103,6 @@ def tail_pvalue(k, n, bound) -> np.ndarray:
     P(Bin(n, bound) >= k) (``binom.sf(k - 1, n, bound)``; 1 for k <= 0, 0 for k > n)."""
     k, n, bound = np.broadcast_arrays(*(np.asarray(v, np.float64) for v in (k, n, bound)))
     return np.asarray(sps.binom.sf(k - 1.0, n, np.clip(bound, 0.0, 1.0)), dtype=np.float64)
-
-
-class MeanCI(NamedTuple):
-    mean: float
-    lower: float
-    upper: float
-    se: float
-    n: int
-
-
-def mean_ci(x, level: float = 0.99, side: str = "two") -> MeanCI:
-    """CLT confidence interval for E[X] from i.i.d. per-seed values.
-
-    Args:
-      x: [S] per-seed values, S >= 2.
-      level: confidence level.
-      side: 'two', 'lower' (one-sided lower bound; upper = +inf) or 'upper'.
-
-    Returns:
-      MeanCI.
-    """
-    _check_level(level)
-    x = np.asarray(x, dtype=np.float64).ravel()
-    if x.size < 2:
-        raise ValueError(f"need at least 2 values for a CLT interval, got {x.size}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("per-seed values contain NaN or inf")
-    mean = float(x.mean())
-    se = float(x.std(ddof=1) / math.sqrt(x.size))
-    z = float(sps.norm.ppf(1.0 - (1.0 - level) / (2.0 if side == "two" else 1.0)))
-    lo = mean - z * se if side in ("two", "lower") else -math.inf
-    hi = mean + z * se if side in ("two", "upper") else math.inf
-    return MeanCI(mean, lo, hi, se, x.size)
 
 
 class SeedInterval(NamedTuple):
@@ -337,6 +305,46 @@ def mean_pvalue(mean: float, se: float, bound: float, direction: str = "le") -> 
     return float(sps.norm.sf(z))
 
 
+def t_pvalue(mean: float, se: float, n: int, bound: float, direction: str = "le") -> float:
+    """One-sided Student-t p-value (n − 1 degrees of freedom) for H0: E[X] <= bound ('le') or
+    E[X] >= bound ('ge'), from the mean and se = sd/√n of n i.i.d. per-seed values; the test
+    whose one-sided interval is ``t_interval(x, 1 − 2·alpha)``'s matching end.
+
+    With se = 0 (every seed equal) the values are treated as exact: 0 when the mean lies on
+    the violating side, 1 otherwise.
+    """
+    n = int(n)
+    if n < 2:
+        raise ValueError(f"a t-test needs at least 2 seeds, got {n}")
+    if direction not in ("le", "ge"):
+        raise ValueError(f"direction must be 'le' or 'ge', got {direction!r}")
+    if se <= 0:
+        return mean_pvalue(mean, 0.0, bound, direction)
+    t = (mean - bound) / se if direction == "le" else (bound - mean) / se
+    return float(sps.t.sf(t, n - 1))
+
+
+def t_detectable_excess(se: float, n: int, alpha: float = 0.01, power: float = 0.8) -> float:
+    """Smallest true excess E[X] − B that the one-sided t-test at level alpha (n − 1 degrees of
+    freedom) detects with the given power: se·δ where the noncentral t with noncentrality δ
+    exceeds t_{1−alpha, n−1} with probability ``power`` (exact, ``scipy.stats.nct``; for large
+    n it tends to (z_{1−alpha} + z_power)·se, ``mean_detectable_excess``)."""
+    from scipy.optimize import brentq
+
+    n = int(n)
+    if n < 2:
+        raise ValueError(f"a t-test needs at least 2 seeds, got {n}")
+    if se <= 0:
+        return 0.0
+    df = n - 1
+    crit = float(sps.t.ppf(1.0 - alpha, df))
+    hi = crit + float(sps.t.ppf(power, df)) + 1.0
+    while sps.nct.sf(crit, df, hi) < power:
+        hi *= 2.0
+    delta = brentq(lambda d: sps.nct.sf(crit, df, d) - power, 0.0, hi, xtol=1e-10)
+    return float(delta * se)
+
+
 def bootstrap_ci(
     data,
     fn: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -355,7 +363,7 @@ def bootstrap_ci(
       fn: maps [..., d] column means to [...] statistics (default: the first column).
       seed: bootstrap seed (``numpy.random.default_rng(seed)``; no global RNG).
       num_resamples: B.
-      level, side: as in ``mean_ci``; a one-sided bound at ``level`` is the matching end of
+      level, side: as in ``clopper_pearson``; a one-sided bound at ``level`` is the matching end of
         the two-sided interval at ``2 level - 1`` (BCa adjusts each end on its own).
       method: 'bca' or 'percentile'. BCa falls back to the percentile interval where scipy
         cannot form it (a bootstrap distribution without spread on one side of the estimate).

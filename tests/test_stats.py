@@ -55,15 +55,15 @@ def test_holm_matches_definition():
     assert reject.tolist() == [True, False, False, True]
 
 
-def test_mean_ci_and_pvalue():
-    x = np.arange(100.0)
-    ci = st.mean_ci(x, 0.99, side="lower")
-    assert ci.upper == np.inf
-    z = sps.norm.ppf(0.99)
-    assert ci.lower == pytest.approx(49.5 - z * x.std(ddof=1) / 10, rel=1e-12)
+def test_t_and_normal_pvalues():
+    # one-sided t-test of "E ≤ 0" with mean 1, se 0.5 (t = 2) at 99 seeds: 98 dof
+    assert st.t_pvalue(1.0, 0.5, 99, 0.0) == pytest.approx(sps.t.sf(2.0, 98), rel=1e-12)
+    assert st.t_pvalue(1.0, 0.5, 5, 2.0, "ge") == pytest.approx(sps.t.sf(2.0, 4), rel=1e-12)
+    assert st.t_pvalue(1.0, 0.5, 5, 0.0) > st.mean_pvalue(1.0, 0.5, 0.0)  # t's heavier tail
+    assert st.t_pvalue(1.0, 0.0, 5, 0.0) == 0.0 and st.t_pvalue(1.0, 0.0, 5, 2.0) == 1.0
+    with pytest.raises(ValueError, match="2 seeds"):
+        st.t_pvalue(1.0, 0.5, 1, 0.0)
     assert st.mean_pvalue(1.0, 0.5, 0.0) == pytest.approx(sps.norm.sf(2.0), rel=1e-12)
-    with pytest.raises(ValueError, match="level"):
-        st.mean_ci(x, 1.5)
 
 
 def test_bootstrap_coverage_and_determinism():
@@ -98,3 +98,8 @@ def test_power_statements():
     # bound < 3/S: can only reject with many events relative to the bound.
     assert st.tail_detectable_prob(100, 1e-4) > 10 * 1e-4
     assert st.mean_detectable_excess(1.0) == pytest.approx(sps.norm.ppf(0.99) + sps.norm.ppf(0.8))
+    # the t-test's: noncentral t with 80% above t_{0.99, n-1}; tends to the normal form
+    d = st.t_detectable_excess(1.0, 5)
+    assert sps.nct.sf(sps.t.ppf(0.99, 4), 4, d) == pytest.approx(0.8, abs=1e-8)
+    assert st.t_detectable_excess(1.0, 10_000) == pytest.approx(
+        st.mean_detectable_excess(1.0), rel=1e-3)

@@ -274,20 +274,9 @@ def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print,
 
 
 def _check_run_dir(exp: NeuralRegretExperiment, run_dir: Path) -> None:
-    """``run_dir`` is absent, or a directory holding this experiment (its fingerprint)."""
-    if run_dir.exists() and not run_dir.is_dir():
-        raise ValueError(f"--out {run_dir} exists and is not a directory")
-    cfg_path = run_dir / "config.json"
-    if cfg_path.exists():
-        try:
-            old = io.load_json(cfg_path)
-        except (OSError, ValueError):
-            raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete it") \
-                from None
-        if old.get("fingerprint") != exp.fingerprint():
-            raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
-                             f"{old.get('fingerprint')} != {exp.fingerprint()}); choose "
-                             f"another --out or delete it")
+    """``run_dir`` is absent, or a directory holding this experiment (its fingerprint):
+    ``io.check_run_dir``."""
+    io.check_run_dir(run_dir, exp.fingerprint())
 
 
 def run_delta_sweep(exp: NeuralRegretExperiment, deltas, out_root: str | Path, *,

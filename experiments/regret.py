@@ -298,19 +298,7 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
     ctx = jax.enable_x64() if exp.float64 else _nullcontext()
     with ctx:
         triples = _configs(exp)  # validation before any compile
-        if run_dir.exists() and not run_dir.is_dir():
-            raise ValueError(f"--out {run_dir} exists and is not a directory")
-        cfg_path = run_dir / "config.json"
-        if cfg_path.exists():
-            try:
-                old = io.load_json(cfg_path)
-            except (OSError, ValueError):
-                raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete "
-                                 f"it") from None
-            if old.get("fingerprint") != exp.fingerprint():
-                raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
-                                 f"{old.get('fingerprint')} != {exp.fingerprint()}); "
-                                 f"choose another --out or delete it")
+        io.check_run_dir(run_dir, exp.fingerprint())  # refuses other settings' directory
         mesh = None
         if ray is not None and exp.devices > 1:
             raise ValueError("--devices: with --ray each task runs on one device (ask for "

@@ -54,6 +54,7 @@ __all__ = [
     "fmt_time",
     "peak_rss_mb",
     "make_run_dir",
+    "check_run_dir",
     "save_json",
     "save_text",
     "save_bytes",
@@ -80,6 +81,44 @@ def make_run_dir(root: str | os.PathLike, name: str, *, exist_ok: bool = True) -
     path.mkdir(parents=True, exist_ok=exist_ok)
     (path / "figures").mkdir(exist_ok=True)
     return path
+
+
+def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
+                  flag: str = "--out") -> None:
+    """Refuses a run directory made with other settings, before anything is computed.
+
+    A run directory may be absent (a new run), or a directory without ``config.json`` (a run
+    that saved nothing yet), or one whose ``config.json`` holds the same ``fingerprint`` (the
+    same experiment, which then resumes). Anything else is refused, so one directory never
+    mixes results of two settings. Reads only; writes nothing.
+
+    Args:
+      run_dir: the run directory the command was given.
+      fingerprint: the experiment's fingerprint (``<Experiment>.fingerprint()``), compared
+        with ``config.json``'s ``"fingerprint"`` field.
+      flag: the command-line flag that named ``run_dir``, quoted in the messages.
+
+    Raises:
+      ValueError: one line naming ``flag`` or the directory: ``run_dir`` exists and is not a
+        directory; its ``config.json`` is unreadable (or not a JSON object); or it holds a
+        different fingerprint.
+    """
+    run_dir = Path(run_dir)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"{flag} {run_dir} exists and is not a directory")
+    cfg_path = run_dir / "config.json"
+    if not cfg_path.exists():
+        return
+    try:
+        old = load_json(cfg_path)
+    except (OSError, ValueError):
+        old = None
+    if not isinstance(old, dict):  # noqa: TRY004 (commands turn ValueError into exit 2)
+        raise ValueError(f"{cfg_path} is unreadable; choose another {flag} or delete it")
+    if old.get("fingerprint") != fingerprint:
+        raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
+                         f"{old.get('fingerprint')} != {fingerprint}); choose another "
+                         f"{flag} or delete it")
 
 
 def _umask() -> int:

@@ -183,3 +183,35 @@ def test_run_lock_is_reentrant_within_a_process(tmp_path):
         assert out.returncode == 3 and "outer" in out.stdout
     with io.run_lock(tmp_path / "r"):  # released after the outer block
         pass
+
+
+# ----------------------------------------------------------------------------- run directories
+
+def test_check_run_dir_accepts_new_empty_and_same_fingerprint(tmp_path):
+    io.check_run_dir(tmp_path / "absent", "abc")  # a new run
+    io.check_run_dir(tmp_path, "abc")  # a directory that saved nothing yet
+    io.save_json(tmp_path / "config.json", {"fingerprint": "abc", "x": 1})
+    io.check_run_dir(tmp_path, "abc")  # the same experiment resumes
+    assert not (tmp_path / "absent").exists()  # reads only
+
+
+def test_check_run_dir_refuses_in_one_line(tmp_path):
+    io.save_json(tmp_path / "config.json", {"fingerprint": "abc"})
+    with pytest.raises(ValueError) as e:
+        io.check_run_dir(tmp_path, "xyz")
+    assert str(e.value) == (f"{tmp_path} holds a different experiment (fingerprint abc != "
+                            f"xyz); choose another --out or delete it")
+    io.save_json(tmp_path / "config.json", {"other": 1})  # no fingerprint: another program's
+    with pytest.raises(ValueError, match="fingerprint None != xyz"):
+        io.check_run_dir(tmp_path, "xyz")
+    a_file = tmp_path / "f.txt"
+    a_file.write_text("x")
+    with pytest.raises(ValueError, match=f"^--out {a_file} exists and is not a directory$"):
+        io.check_run_dir(a_file, "abc")
+    for bad in ("{not json", "[1, 2]", ""):  # unreadable, or JSON but not an object
+        (tmp_path / "config.json").write_text(bad)
+        with pytest.raises(ValueError) as e:
+            io.check_run_dir(tmp_path, "abc", flag="--out-dir")
+        assert str(e.value) == (f"{tmp_path / 'config.json'} is unreadable; choose another "
+                                f"--out-dir or delete it")
+        assert "\n" not in str(e.value)

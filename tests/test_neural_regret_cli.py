@@ -186,3 +186,17 @@ def test_delta_sweep_checks_every_folder_before_the_first_runs(tmp_path, capsys)
     err = capsys.readouterr().err.strip()
     assert "d0.7" in err and "\n" not in err, err
     assert not (out / "d0.5").exists()
+
+
+def test_other_experiment_in_the_folder_is_refused_in_one_line(run_dir, capsys):
+    """The fingerprint check (io.check_run_dir) before anything runs: another δ is another
+    experiment; the folder's config.json is left as it was."""
+    before = (run_dir / "config.json").read_bytes()
+    argv = list(ARGS)
+    argv[argv.index("--delta") + 1] = "0.6"
+    capsys.readouterr()
+    assert cli.main(argv + ["--out", str(run_dir)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{run_dir} holds a different experiment (fingerprint " in err, err
+    assert err.endswith("choose another --out or delete it") and "\n" not in err, err
+    assert (run_dir / "config.json").read_bytes() == before

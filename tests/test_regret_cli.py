@@ -46,8 +46,19 @@ def test_resume_after_interruption_loses_nothing(run_dir, tmp_path):
         np.testing.assert_array_equal(a[k], b[k])
 
 
-def test_different_experiment_in_same_dir_is_refused(run_dir):
+def test_different_experiment_in_same_dir_is_refused(run_dir, tmp_path, capsys):
+    before = (run_dir / "config.json").read_bytes()
+    capsys.readouterr()
     assert cli.main(ARGS[:-1] + ["--alpha", "0.5", "--out", str(run_dir)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{run_dir} holds a different experiment (fingerprint " in err, err
+    assert err.endswith("choose another --out or delete it") and "\n" not in err, err
+    assert (run_dir / "config.json").read_bytes() == before
+    a_file = tmp_path / "file"
+    a_file.write_text("")
+    assert cli.main(ARGS + ["--out", str(a_file)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"--out {a_file} exists and is not a directory") and "\n" not in err
 
 
 @pytest.mark.parametrize("bad,match", [

@@ -262,3 +262,24 @@ def test_package_reexports_core_modules_lazily():
                          text=True, timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
     assert res.returncode == 0, res.stderr[-2000:]
     assert set(CORE) >= set(__import__("sern_jax").__all__[1:])
+
+
+def test_summary_integer_paths_equal_the_float_paths():
+    # The counts histogram looks bins up in a table and the counts mean comes from exact int32
+    # partial sums (issue 20, faster on the H100); both must equal the float paths they
+    # replace: the table equals _bin_index on every integer 0..T, and the block sums (forced
+    # small here, with padding and masked seeds) equal the compensated float sum.
+    config = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=4, horizon=3000)
+    edges = executor.summary_edges(config)["counts"]  # [G, 65]
+    table = executor._bin_table(edges)
+    num_g = edges.shape[0]
+    values = jnp.broadcast_to(jnp.arange(3001, dtype=jnp.float32)[:, None, None], (3001, num_g, 1))
+    ref = executor._bin_index(values, jnp.asarray(edges, jnp.float32), jnp.float32)
+    np.testing.assert_array_equal(table.T, np.asarray(ref)[:, :, 0])
+    x = jax.random.randint(jax.random.key(3), (37, 5, 4), 0, 3001, jnp.int32)
+    valid = jnp.arange(37) < 33
+    want = executor.compensated_sum(jnp.where(valid[:, None, None], x, 0).astype(jnp.float32))
+    for top in (3000, 2**31 // 7, 2**30):  # blocks of all seeds, 7 seeds, 1 seed
+        got = executor._int_field_sum(x, valid, top, jnp.float32)
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert np.asarray(want).sum() == int(jnp.sum(jnp.where(valid[:, None, None], x, 0)))

@@ -92,7 +92,7 @@ def main():
         res[f"fused_new_{rep}"] = timeit(lambda: g_new(keys, params, n))
     res["run_seeds_summary_new"] = timeit(
         lambda: executor.run_seeds(config, params, 0, seeds, summary=True), repeats=5)
-    for chunk in (100_000, 50_000, 25_000):
+    for chunk in (50_000, 25_000):
         eng = jax.jit(fast_softmax.make_batched(config, chunk=chunk))
         res[f"engine_chunk{chunk}"] = timeit(lambda: eng(keys, params))
         del eng

@@ -389,6 +389,25 @@ def test_readme_quotes_the_one_command_strong_run(tmp_path):
             in readme)
 
 
+def test_cluster_doc_quotes_the_seed_subset_measurement():
+    """docs/CLUSTER.md's reason for keeping object units: subsets of >= 2 seeds equal the
+    full run bit for bit, one seed alone does not; figures from the committed report."""
+    doc = " ".join((ROOT / "docs" / "CLUSTER.md").read_text().split())
+    rep = json.loads((ROOT / "experiments" / "results" / "ray_scaling" /
+                      "seed_subset_cpu.json").read_text())["subsets"]
+    for subset in ("(1, 3)", "(0, 1, 2)"):
+        assert all(rep[subset]["results_equal"].values())
+        assert all(st["leaves_equal"] == st["leaves"] for st in rep[subset]["states"])
+    one = rep["(2,)"]
+    assert all(one["results_equal"].values())
+    differ = sorted(st["leaves"] - st["leaves_equal"] for st in one["states"])
+    worst = max(st["max_abs_diff"] for st in one["states"])
+    assert differ[0] > 0 and f"{differ[0]} to {differ[-1]} of each learner's 60" in doc
+    assert {st["leaves"] for st in one["states"]} == {60}
+    assert f"up to {worst:.1e}".replace("e-07", "e-7") in doc
+    assert "seeds {1, 3} and {0, 1, 2} run alone" in doc and "seed {2} alone" in doc
+
+
 def test_no_cluster_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):
     ray = pytest.importorskip("ray")
     if ray.is_initialized():

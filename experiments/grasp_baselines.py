@@ -5,6 +5,7 @@
     python -m experiments.grasp_baselines tune   --out DIR   # main knobs, on other objects
     python -m experiments.grasp_baselines run    --out DIR   # the comparison (20 seeds)
     python -m experiments.grasp_baselines summarize --out DIR
+    python -m experiments.grasp_baselines merge --out DIR --merge-from NEW  # rerun learners
 
 All learners share θ0, the core set, the update (40 Adam steps on D ∪ C after each phase of
 20 grasps) and the budget (R = 5 rounds of 20 exploration + 5 evaluation grasps), and, within
@@ -62,10 +63,15 @@ GRID = {
     "egreedy_decay": ("decay_epsilon0", (0.5, 1.0, 2.0)),
     "neural_linucb": ("ucb_width", (0.25, 1.0, 4.0)),
     "neural_lints": ("lambda_prior", (0.05, 0.25, 1.25)),  # prior variance σ²/λ
-    "ensemble_ts": ("ensemble_size", (2, 3, 5)),
+    # shared heads (the default layout since the rerun): the default 3, the earlier
+    # comparison's 5 (whole networks, tuned over 2, 3, 5), Bootstrapped DQN's K = 10
+    "ensemble_ts": ("ensemble_size", (3, 5, 10)),
     "neural_ucb": ("nu", (0.1, 1.0, 10.0)),
 }
 NO_KNOB = ("greedy", "normalized")
+# Hyperparameters added after runs were recorded, with the value those runs used (their
+# meta.json lacks the field): ensemble_ts ran M whole networks before --ensemble-heads.
+FORMER_DEFAULTS = {"ensemble_ts": {"ensemble_heads": "networks"}}
 _CONFIG_FIELDS = ("alpha", "epsilon", "alpha0", "p")  # OnlineConfig's own fields
 DEFAULT_OUT = Path("experiments/results/grasp_baselines")
 
@@ -267,6 +273,52 @@ class DifferentRunError(ValueError):
     """``run``'s run directory holds another run (one line; ``main`` exits 2)."""
 
 
+def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | None:
+    """Refuses (:class:`DifferentRunError`) a run directory holding another run, before
+    ``meta.json`` is touched (the runner, or learn_units, would refuse it only after
+    ``meta.json`` was rewritten with these settings): its ``checkpoint.npz`` (a single-process
+    run's, or a ``--ray`` run's join) and each reported object's ``units/object_*/
+    checkpoint.npz`` (what a ``--ray`` run leaves, also when it stopped before any join)
+    must carry the fingerprint these settings give (``runner.run_fingerprint`` of the whole
+    run, or of that object alone). Unit folders of objects not in ``specs`` are ignored (the
+    runner never reads them). Returns the run's checkpoint (None if there is none)."""
+    from sern_jax import io
+    from sern_jax.grasp import learn_units, runner
+
+    advice = "delete it (or choose another --out) and rerun"
+    mixed = (f"--out {out}: {run_dir} holds a different learning run than these settings; "
+             "choose another --out (or --run-dir) or delete it")
+    ckpt = run_dir / "checkpoint.npz"
+    saved = io.load_npz(ckpt, advice=advice) if ckpt.exists() else None
+    if saved is not None and (str(saved.get("fingerprint", ""))
+                              != runner.run_fingerprint(config, specs, theta0)):
+        raise DifferentRunError(mixed)
+    # The fingerprint holds the hyperparameters given, not the defaults, so a learner
+    # whose default changed (ensemble_ts: --ensemble-heads networks -> shared) has the same
+    # fingerprint under both: the learners' configs meta.json recorded must match too.
+    recorded = out / "meta.json"
+    if saved is not None and recorded.exists():
+        before = json.loads(recorded.read_text()).get("learner_configs", {})
+        for name in config.policies:
+            was = {**FORMER_DEFAULTS.get(name, {}), **before.get(name, {})}
+            now = dataclasses.asdict(config.learner_config(name))
+            for field in sorted(set(was) & set(now)):
+                if was[field] != now[field]:
+                    raise DifferentRunError(
+                        f"--out {out}: {run_dir} holds a run whose {name} had {field} = "
+                        f"{was[field]!r} (meta.json), these settings give {now[field]!r} "
+                        "(a default changed since); choose another --out")
+    for spec in specs:
+        unit = learn_units.unit_dir(run_dir, spec) / "checkpoint.npz"
+        if not unit.exists():
+            continue
+        got = str(io.load_npz(unit, advice=advice).get("fingerprint", ""))
+        if got != runner.run_fingerprint(config, [spec], theta0):
+            raise DifferentRunError(mixed.replace(
+                f"{run_dir} holds", f"{unit.parent} (a --ray unit of {run_dir}) holds"))
+    return saved
+
+
 def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, untuned: bool,
         num_objects: int | None, progress: bool, explore: int = 20,
         run_dir: Path | None = None, regret_grasps: int = 0,
@@ -286,18 +338,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
                            explore=explore, regret_trials=regret_trials,
                            regret_grasps=regret_grasps, backend=backend)
     run_dir = run_dir or out / "run"
-    # another run's directory is refused before meta.json is touched (the runner, or
-    # learn_units, would refuse it only after meta.json was rewritten with these settings)
-    ckpt = run_dir / "checkpoint.npz"
-    saved = (io.load_npz(ckpt, advice="delete it (or choose another --out) and rerun")
-             if ckpt.exists() else None)
-    if saved is not None:
-        from sern_jax.grasp import runner
-
-        if str(saved.get("fingerprint", "")) != runner.run_fingerprint(config, specs, theta0):
-            raise DifferentRunError(f"--out {out}: {run_dir} holds a different learning run "
-                                    "than these settings; choose another --out (or "
-                                    "--run-dir) or delete it")
+    saved = check_run_dir(out, run_dir, config, specs, theta0)
     out.mkdir(parents=True, exist_ok=True)
     meta = io.run_metadata(
         experiment="grasp_baselines", objects=[s.name for s in specs],
@@ -347,9 +388,25 @@ def _physics_settings():
     return fn() if fn else None
 
 
+PER_SEED_FIELDS = ("paper_eval", "lowvar_eval", "explore_success", "pseudo_regret")
+
+
+class MergeError(ValueError):
+    """``merge``: the runs cannot be joined (one line; ``main`` exits 2, nothing written)."""
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Bit for bit (NaN equal to NaN: unfinished rounds, no regret accounting)."""
+    return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+
+
 def collect(out: Path) -> None:
     """``per_seed.npz`` from the run directory's checkpoint (the finished rounds only; a
-    stopped run records ``rounds_completed`` in meta.json), then :func:`summarize`."""
+    stopped run records ``rounds_completed`` in meta.json), then :func:`summarize`.
+
+    A merged comparison (:func:`merge`; ``meta["merged"]``) takes each merged learner's
+    slices from its own run's checkpoint (``out/<merged run_dir>/checkpoint.npz``), after
+    checking that run's reference learner equals the main run's bit for bit."""
     from sern_jax import io
 
     meta = json.loads((out / "meta.json").read_text())
@@ -360,12 +417,123 @@ def collect(out: Path) -> None:
     done = int(saved["next_round"])  # rounds 0 .. done - 1 are finished
     if done < 2:
         raise SystemExit(f"only {done} round(s) finished: nothing to compare")
-    fields = ("paper_eval", "lowvar_eval", "explore_success", "pseudo_regret")
+    per_seed = {f: np.asarray(saved[f])[:done] for f in PER_SEED_FIELDS}
+    for part in meta.get("merged", []):
+        other = io.load_npz(out / part["run_dir"] / "checkpoint.npz")
+        if int(other["next_round"]) != int(saved["next_round"]):
+            raise MergeError(f"{part['run_dir']}: finished {int(other['next_round']) - 1} "
+                             f"rounds, the main run {done - 1}")
+        names, src = meta["learners"], part["source_learners"]
+        q_ref, p_ref = names.index(REFERENCE), src.index(REFERENCE)
+        for f in PER_SEED_FIELDS:
+            theirs = np.asarray(other[f])[:done]
+            if not _same(theirs[:, :, p_ref], per_seed[f][:, :, q_ref]):
+                raise MergeError(f"{part['run_dir']}: its {REFERENCE} {f} differs from the "
+                                 f"main run's: the learners' results are not independent of "
+                                 f"the run they are in; rerun every learner together")
+            for name in part["learners"]:
+                per_seed[f][:, :, names.index(name)] = theirs[:, :, src.index(name)]
     np.savez_compressed(out / "per_seed.npz",
-                        **{f: np.asarray(saved[f])[:done].astype(np.float32) for f in fields})
+                        **{f: v.astype(np.float32) for f, v in per_seed.items()})
     meta["rounds_completed"] = done - 1
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     summarize(out)
+
+
+# Settings that must agree between a comparison and a run merged into it.
+_MERGE_SAME = ("objects", "num_seeds", "rounds", "explore", "evaluate", "eval_poses",
+               "eval_trials", "regret_trials", "regret_grasps", "backend",
+               "theta0_fingerprint", "physics", "reference")
+
+
+def merge(out: Path, new: Path) -> dict:
+    """Replaces learners of the comparison in ``out`` by their rerun in ``new`` (a ``tune``
+    and ``run`` of ``--policies sern,<learners>`` into another --out, e.g. with a new
+    default), keeping every other learner's results. Valid only if a learner's per-seed
+    results do not depend on which learners run beside it (keys per object and seed, trials
+    shared only where choices coincide, a trial independent of its batch): checked on the
+    reference learner, whose per-seed figures in ``new`` must equal ``out``'s bit for bit in
+    every field and round (and in tuning: its tuning scores per seed), else nothing is
+    written (``MergeError``). Writes ``out/run_<learners>/checkpoint.npz`` (the rerun's
+    checkpoint; ``run/`` is kept), ``meta.json`` (the learners' configs and
+    hyperparameters, and ``merged``: which learners came from which run, its command,
+    calls and code), ``tuned.json`` / ``tune_per_seed.npz`` (the learners' tuning replaced,
+    the earlier one kept under ``replaced``), then :func:`collect` (per-seed file, summary,
+    table)."""
+    from sern_jax import io
+
+    meta, meta_new = (json.loads((d / "meta.json").read_text()) for d in (out, new))
+    tuned, tuned_new = (json.loads((d / "tuned.json").read_text()) for d in (out, new))
+    tps, tps_new = (dict(np.load(d / "tune_per_seed.npz")) for d in (out, new))
+    for key in _MERGE_SAME:
+        if meta.get(key) != meta_new.get(key):
+            raise MergeError(f"--merge-from {new}: {key} differs ({meta_new.get(key)!r}, "
+                             f"the comparison's {meta.get(key)!r})")
+    src = list(meta_new["learners"])
+    replaced = [n for n in src if n != REFERENCE]
+    if REFERENCE not in src or not replaced or not set(replaced) <= set(meta["learners"]):
+        raise MergeError(f"--merge-from {new}: its learners {src} must be {REFERENCE} and "
+                         f"learners of the comparison {meta['learners']}")
+    if meta_new["learner_configs"][REFERENCE] != meta["learner_configs"][REFERENCE]:
+        raise MergeError(f"--merge-from {new}: {REFERENCE}'s hyperparameters differ")
+    for key in ("objects", "seeds", "rounds", "explore", "criterion"):
+        if tuned.get(key) != tuned_new.get(key):
+            raise MergeError(f"--merge-from {new}: tuning {key} differs")
+    q_ref, p_ref = tuned["learners"].index(REFERENCE), tuned_new["learners"].index(REFERENCE)
+    for f in tps:
+        if not _same(tps_new[f][:, :, :, p_ref], tps[f][:, :, :, q_ref]):
+            raise MergeError(f"--merge-from {new}: {REFERENCE}'s tuning {f} differs from "
+                             "the comparison's: rerun every learner's tuning together")
+    run_name = "run_" + "_".join(replaced)
+    ckpt = io.load_npz(new / "run" / "checkpoint.npz")
+    # the reference learner's results are compared before anything is written
+    main_dir = Path(meta["run_dir"])
+    if not (main_dir / "checkpoint.npz").exists():  # made elsewhere (a device's $OUT)
+        main_dir = out / "run"
+    main_ckpt = io.load_npz(main_dir / "checkpoint.npz")
+    if int(ckpt["next_round"]) != int(main_ckpt["next_round"]):
+        raise MergeError(f"--merge-from {new}: finished {int(ckpt['next_round']) - 1} "
+                         f"rounds, the comparison {int(main_ckpt['next_round']) - 1}")
+    for f in PER_SEED_FIELDS + ("explore_action", "explore_reward"):
+        mine = np.asarray(main_ckpt[f])
+        mine = mine[:, :, meta["learners"].index(REFERENCE)] if f != "explore_reward" \
+            else mine[..., meta["learners"].index(REFERENCE), :]
+        theirs = np.asarray(ckpt[f])
+        theirs = theirs[:, :, src.index(REFERENCE)] if f != "explore_reward" \
+            else theirs[..., src.index(REFERENCE), :]
+        if not _same(theirs, mine):
+            raise MergeError(f"--merge-from {new}: its {REFERENCE} {f} differs from the "
+                             "comparison's: rerun every learner together")
+    (out / run_name).mkdir(exist_ok=True)
+    io.save_npz(out / run_name / "checkpoint.npz", **ckpt)
+    for name in replaced:
+        meta["learner_configs"][name] = meta_new["learner_configs"][name]
+        q, p = tuned["learners"].index(name), tuned_new["learners"].index(name)
+        for f in tps:
+            tps[f][:, :, :, q] = tps_new[f][:, :, :, p]
+        tuned.setdefault("replaced", {})[name] = {
+            **tuned["grid"][name], "why": "rerun with another default (merge)",
+            "tune_per_seed": "the earlier tune_per_seed.npz, in git history"}
+        tuned["grid"][name] = tuned_new["grid"][name]
+    for field, value in meta_new["hyperparameters"].items():
+        if field in {GRID[n][0] for n in replaced if n in GRID}:
+            meta["hyperparameters"][field] = value
+    tuned["merged"] = {"learners": replaced, "command": tuned_new.get("command"),
+                       "machine": tuned_new.get("machine"), "wall_s": tuned_new.get("wall_s"),
+                       "reference_tuning_identical": True}
+    tuned["resolution"] = tuning_resolution(tps["lowvar_eval"], tuned)
+    np.savez_compressed(out / "tune_per_seed.npz", **tps)
+    (out / "tuned.json").write_text(json.dumps(tuned, indent=1, default=str))
+    meta.setdefault("merged", []).append({
+        "learners": replaced, "source_learners": src, "run_dir": run_name,
+        "reference_identical": f"{REFERENCE}'s per-seed {', '.join(PER_SEED_FIELDS)} and "
+                               "tuning scores equal the main run's bit for bit",
+        **{k: meta_new.get(k) for k in ("command", "calls", "git_commit", "created",
+                                        "versions", "host", "jax", "wall_s",
+                                        "learner_configs", "hyperparameters")}})
+    (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
+    collect(out)
+    return meta
 
 
 # ----------------------------------------------------------------------------- summary
@@ -685,7 +853,7 @@ def record_learn_timing(run_dir: Path, summary_json: Path, time_file: Path) -> d
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize",
-                                    "record-learn"))
+                                    "record-learn", "merge"))
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
     p.add_argument("--seeds", type=int, default=20)
     p.add_argument("--tune-seeds", type=int, default=4)
@@ -716,6 +884,10 @@ def main(argv=None) -> None:
                    help="record-learn: a timed `sern grasp learn` run directory; its "
                         "--json-out file and /usr/bin/time -v -o file are DIR.json and "
                         "DIR.time beside it (written to --json-out)")
+    p.add_argument("--merge-from", type=Path, default=None,
+                   help="merge: a tune + run of --policies sern,<learners> (its --out) whose "
+                        "learners replace the comparison's in --out (sern must be equal bit "
+                        "for bit)")
     from sern_jax import distributed
 
     distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
@@ -797,6 +969,19 @@ def main(argv=None) -> None:
         a.json_out.write_text(json.dumps(doc, indent=1, default=str))
         print(json.dumps({k: doc[k] for k in ("seconds", "user_cpu_s", "system_cpu_s",
                                               "trial_counts")}))
+    elif a.what == "merge":
+        if a.merge_from is None:
+            p.error("merge needs --merge-from DIR")
+        for d, flag in ((a.out, "--out"), (a.merge_from, "--merge-from")):
+            for f in ("meta.json", "tuned.json", "tune_per_seed.npz"):
+                if not (d / f).exists():
+                    p.error(f"{flag}: {d / f} is missing")
+        if not (a.merge_from / "run" / "checkpoint.npz").exists():
+            p.error(f"--merge-from: {a.merge_from / 'run' / 'checkpoint.npz'} is missing")
+        try:
+            merge(a.out, a.merge_from)
+        except MergeError as e:  # nothing written
+            p.exit(2, f"{p.prog}: error: {e}\n")
     elif a.what == "collect":
         collect(a.out)
     else:

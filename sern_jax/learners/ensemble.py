@@ -1,9 +1,16 @@
-"""Bootstrapped-ensemble Thompson sampling (Osband et al.; the Showdown's BootRMS).
+"""Bootstrapped-ensemble Thompson sampling (Osband et al. 2016; the Showdown's BootRMS).
 
-M members, each a copy of the network started from θ0 and fine-tuned by the common optax
-update on its own bootstrap weights of D ∪ C; at every decision one member is drawn
-uniformly (from ``act``'s key) and its argmax over the valid candidates is played (ties:
-uniform, by the shared ``obs.u``).
+M members started from θ0, each fine-tuned by the common optax update on its own bootstrap
+weights of D ∪ C; at every decision one member is drawn uniformly (from ``act``'s key) and
+its argmax over the valid candidates is played (ties: uniform, by the shared ``obs.u``).
+
+Two layouts (``--ensemble-heads``). ``shared``, the default: Bootstrapped DQN's (Osband et
+al. 2016), one network θ and M linear heads on its last hidden features, about one
+network's cost per round (:func:`_shared_heads`). ``networks``: M whole network copies
+(Riquelme et al. 2018's BootRMS), M forwards per greedy evaluation and M fits per update.
+The default was ``networks`` until the comparison's rerun with shared heads (issue 18,
+``docs/RESULTS.md`` Baselines): shared heads is the layout of the paper the issue cites for
+this learner and the only one within the issue's 1.5x-of-SERN round cost at M >= 3.
 
 Bootstrap weights (``--bootstrap``): ``bernoulli`` (each row kept in a member's data with
 probability ``--bootstrap-p``, weight 0 or 1: the Showdown's BootRMS, p = 0.95, and
@@ -18,23 +25,23 @@ their bootstrap weights and minibatch draws: the first phase is greedy on θ0, a
 members part from the first update on (Osband et al. start members from independent random
 initialisations, which a fine-tuning learner does not have). Defaults are the Showdown's
 (``hparams_rms`` in tensorflow/models ``research/deep_contextual_bandits/example_main.py``:
-q = 3 models, p = 0.95); Bootstrapped DQN uses K = 10 heads.
+q = 3 models, p = 0.95); Bootstrapped DQN uses K = 10 heads. The comparison tunes M over
+3, 5 and 10 (``experiments/grasp_baselines.py``, GRID).
 
 ``probs`` is π exactly: the mixture ``(1/M) Σ_m greedy_probs(r̂_m, mask)`` (each member's
 argmax, ties uniform, with probability 1/M), so pseudo-regret is computed under the policy's
 own distribution. Greedy evaluation (``predict``) uses the members' mean r̂.
 
-State: ``params`` / ``opt_state`` hold member 0 (so whatever reads ``state.params`` as one
-network sees a genuine member), ``extra.params`` / ``extra.opt_state`` members 1..M-1
-stacked on a leading axis [M - 1, ...], ``extra.weights`` the bootstrap weights
-[M, T + |C|].
+State (``networks``): ``params`` / ``opt_state`` hold member 0 (so whatever reads
+``state.params`` as one network sees a genuine member), ``extra.params`` /
+``extra.opt_state`` members 1..M-1 stacked on a leading axis [M - 1, ...],
+``extra.weights`` the bootstrap weights [M, T + |C|].
 
-Cost. ``act`` computes the action from the drawn member's forward alone and π from all M,
-so a caller that does not output π (the grasp runner without regret accounting) runs one
-forward per decision; ``update`` fits the M members as one vmapped computation; greedy
-evaluation needs all M. ``--ensemble-heads shared`` (not the default, other results) is
-Bootstrapped DQN's one network with M heads, about one network's cost
-(:func:`_shared_heads`).
+Cost (``networks``). ``act`` computes the action from the drawn member's forward alone and
+π from all M, so a caller that does not output π (the grasp runner without regret
+accounting) runs one forward per decision; ``update`` fits the M members as one vmapped
+computation; greedy evaluation needs all M. ``shared`` (the default) costs about one
+network per decision, update and evaluation (:func:`_shared_heads`).
 """
 
 from __future__ import annotations
@@ -71,11 +78,11 @@ class EnsembleConfig:
     bootstrap_p: float = dataclasses.field(default=0.95, metadata={
         "flag": "--bootstrap-p", "help": "ensemble_ts: probability a row is in a member's "
         "data, bernoulli only (Riquelme et al. 2018: 0.95)"})
-    ensemble_heads: str = dataclasses.field(default="networks", metadata={
-        "flag": "--ensemble-heads", "help": "ensemble_ts: networks (M whole network "
-        "copies, the default; M forwards and fits) or shared (one network, M linear heads "
-        "on its last hidden features, Bootstrapped DQN's shared torso: about one "
-        "network's cost; other results)"})
+    ensemble_heads: str = dataclasses.field(default="shared", metadata={
+        "flag": "--ensemble-heads", "help": "ensemble_ts: shared (the default: one "
+        "network, M linear heads on its last hidden features, Bootstrapped DQN's layout, "
+        "Osband et al. 2016; about one network's cost) or networks (M whole network "
+        "copies, Riquelme et al. 2018's BootRMS; M forwards and fits)"})
 
     def __post_init__(self):
         m = self.ensemble_size
@@ -202,7 +209,7 @@ def _shared_heads(model: base.Model, train: base.TrainConfig,
     mean loss, with one Adam. A decision costs one forward (the M heads are a [d, M]
     product), an update one network's fit: about SERN's cost, where ``networks`` costs M
     forwards per evaluation and M fits. The members share θ, so they are more alike than
-    M independent networks: another learner, with other results.
+    M independent networks: another learner than ``networks``, with other results.
 
     State: ``params`` is θ (the shared network, not a member), ``opt_state`` Adam's over
     ``(model.trainable(θ), heads)``, ``extra`` :class:`SharedHeadsExtra`."""

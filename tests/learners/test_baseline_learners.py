@@ -55,11 +55,16 @@ _rng = np.random.default_rng(0)
 CORE = base.Data((jnp.asarray(_rng.normal(size=(6, D)), jnp.float32),),
                  jnp.asarray([1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), jnp.ones(6))
 THETA0 = MODEL.init(jax.random.key(0))
+# ensemble_ts's default layout is shared heads (covered by tests/learners/test_learners.py's
+# contract on every registered learner's defaults and by the shared-heads tests below); the
+# tests here that take NETWORKS keep the whole-network layout (--ensemble-heads networks)
+# covered: contract (slow), told only failures, 1/M frequency, drawn-member act.
+NETWORKS = ensemble.EnsembleConfig(ensemble_size=3, ensemble_heads="networks")
 
 def FACTORIES_OF(model):
     return (("neural_linucb", neural_linear.neural_linucb(model, TRAIN)),
             ("neural_lints", neural_linear.neural_lints(model, TRAIN)),
-            ("ensemble_ts", ensemble.ensemble_ts(model, TRAIN)),
+            ("ensemble_ts", ensemble.ensemble_ts(model, TRAIN, NETWORKS)),
             ("neural_ucb", neural_ucb.neural_ucb(model, TRAIN)),
             ("normalized", normalized.normalized(model, TRAIN)),
             ("egreedy_decay", decaying.egreedy_decay(model, TRAIN)),
@@ -69,7 +74,7 @@ def FACTORIES_OF(model):
 FACTORIES = {
     "neural_linucb": lambda: neural_linear.neural_linucb(MODEL, TRAIN),
     "neural_lints": lambda: neural_linear.neural_lints(MODEL, TRAIN),
-    "ensemble_ts": lambda: ensemble.ensemble_ts(MODEL, TRAIN),
+    "ensemble_ts": lambda: ensemble.ensemble_ts(MODEL, TRAIN, NETWORKS),
     "neural_ucb": lambda: neural_ucb.neural_ucb(MODEL, TRAIN),
     "normalized": lambda: normalized.normalized(MODEL, TRAIN),
     "egreedy_decay": lambda: decaying.egreedy_decay(MODEL, TRAIN),
@@ -322,7 +327,8 @@ def _linear_members(num_m):
 def test_ensemble_ts_plays_each_members_argmax_with_frequency_one_over_m():
     num_m, n = 3, 3000
     model, members = _linear_members(num_m)
-    lrn = ensemble.ensemble_ts(model, TRAIN, ensemble.EnsembleConfig(ensemble_size=num_m))
+    lrn = ensemble.ensemble_ts(model, TRAIN, dataclasses.replace(NETWORKS,
+                                                                 ensemble_size=num_m))
     state = lrn.init(jax.random.key(0), model.init(None), CORE._replace(
         inputs=(jnp.zeros((6, D)),)))
     state = state._replace(params=jax.tree.map(lambda x: x[0], members),
@@ -348,7 +354,8 @@ def test_ensemble_act_plays_the_drawn_members_argmax_with_or_without_probs():
     before, the argmax of member m among all M members' forwards, on every decision, and
     be the same whether or not the jitted caller outputs probs (the runner's two paths)."""
     num_m, n = 4, 64
-    lrn = ensemble.ensemble_ts(MODEL, TRAIN, ensemble.EnsembleConfig(ensemble_size=num_m))
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN, dataclasses.replace(NETWORKS,
+                                                                 ensemble_size=num_m))
     state = lrn.init(jax.random.key(0), THETA0, CORE)
     for i in range(2):  # members part
         state = jax.jit(lrn.update)(jax.random.key(10 + i), state, _batch(jax.random.key(i)))
@@ -377,7 +384,8 @@ def test_ensemble_act_plays_the_drawn_members_argmax_with_or_without_probs():
 
 @pytest.mark.parametrize("kind", ["bernoulli", "poisson"])
 def test_ensemble_bootstrap_weights_and_members_part(kind):
-    config = ensemble.EnsembleConfig(ensemble_size=4, bootstrap=kind, bootstrap_p=0.5)
+    config = ensemble.EnsembleConfig(ensemble_size=4, bootstrap=kind, bootstrap_p=0.5,
+                                     ensemble_heads="networks")
     lrn = ensemble.ensemble_ts(MODEL, TRAIN, config)
     state = lrn.init(jax.random.key(0), THETA0, CORE)
     w = np.asarray(state.extra.weights)
@@ -494,6 +502,18 @@ def test_configs_are_frozen_and_flags_documented():
 
 
 SHARED = ensemble.EnsembleConfig(ensemble_size=3, ensemble_heads="shared")
+
+
+def test_ensemble_default_layout_is_shared_heads():
+    """The default since the comparison's rerun (issue 18); whole networks stay selectable
+    under the flag's existing value."""
+    assert ensemble.EnsembleConfig() == dataclasses.replace(SHARED, ensemble_size=3)
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN)
+    assert isinstance(lrn.init(jax.random.key(0), THETA0, CORE).extra,
+                      ensemble.SharedHeadsExtra)
+    lrn = ensemble.ensemble_ts(MODEL, TRAIN, NETWORKS)
+    assert isinstance(lrn.init(jax.random.key(0), THETA0, CORE).extra,
+                      ensemble.EnsembleExtra)
 
 
 def test_ensemble_shared_heads_contract():

@@ -22,7 +22,7 @@ import functools
 import math
 import os
 import threading
-from typing import Callable, NamedTuple, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -377,6 +377,17 @@ def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
             batched = fast_softmax.make_batched(config, chunk=inner, mesh=mesh)
         else:
             batched = jax.vmap(make_run(config), in_axes=(0, None))
+        if summary and mesh is None:
+            # Two compiled calls, the engine's (shared with the per-seed path) and the
+            # reduction's, not one fused program: fused, XLA:GPU ran the engine itself slower
+            # (one H100, 200,000 seeds, K = 64, T = 10^4: engine 1,934 ms alone, engine +
+            # reduction 1,964 ms fused against 1,934 + 24 ms apart; with this commit's cheaper
+            # reduction 1,989 ms fused, 18 ms apart: profile_summary2_h100.json).
+            edges = summary_edges(config)
+            engine = batched_runner(config, None, fast, inner)
+            reduce = jax.jit(lambda out, num_valid: summarize_outputs(out, num_valid, edges))
+            _RUNNER_CACHE[cache_key] = _EngineThenSummary(engine, reduce)
+            return _RUNNER_CACHE[cache_key]
         if summary:
             edges = summary_edges(config)
             per_seed = batched
@@ -400,6 +411,31 @@ def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
                 out_shardings=jax.sharding.NamedSharding(mesh, spec),
             )
     return _RUNNER_CACHE[cache_key]
+
+
+class _EngineThenSummary:
+    """``fn(keys, params, num_valid) -> {field: statistics}`` as two jitted calls, the per-seed
+    engine then :func:`summarize_outputs`; ``lower(...).compile()`` like a jitted function."""
+
+    def __init__(self, engine, reduce):
+        self.engine, self.reduce = engine, reduce
+
+    def __call__(self, keys, params, num_valid):
+        return self.reduce(self.engine(keys, params), num_valid)
+
+    def lower(self, keys, params, num_valid):
+        engine = self.engine.lower(keys, params)
+        out = jax.eval_shape(self.engine, keys, params)
+        return _LoweredPair(engine, self.reduce.lower(out, num_valid))
+
+
+class _LoweredPair(NamedTuple):
+    engine: Any  # jax.stages.Lowered
+    reduce: Any  # jax.stages.Lowered
+
+    def compile(self):
+        engine, reduce = self.engine.compile(), self.reduce.compile()
+        return lambda keys, params, num_valid: reduce(engine(keys, params), num_valid)
 
 
 # ----------------------------------------------------------------------------- summaries
@@ -537,15 +573,21 @@ def compensated_sum(x: jax.Array) -> jax.Array:
     """
     s, c = x, jnp.zeros_like(x)
     rest = []
+    level = 0
     while s.shape[0] > 1:
         if s.shape[0] % 2:
             rest.append((s[-1], c[-1]))
             s, c = s[:-1], c[:-1]
         h = s.shape[0] // 2
         s, e = _two_sum(s[:h], s[h:])
-        # one kernel per level: fused across levels, each output would inline a 2^levels-leaf
-        # expression tree (XLA:GPU spent minutes compiling it for 200,000 seeds)
-        s, c = jax.lax.optimization_barrier((s, c[:h] + c[h:] + e))
+        c = c[:h] + c[h:] + e
+        level += 1
+        # a barrier every 4 levels: fused across all levels, each output would inline a
+        # 2^levels-leaf expression tree (XLA:GPU spent minutes compiling it for 200,000 seeds);
+        # one per level cost 2.9 ms on a [200,000, 30, 64] sum on one H100, every 4 levels
+        # 2.1 ms, bit-identical (profile_summary_h100.json)
+        if level % 4 == 0:
+            s, c = jax.lax.optimization_barrier((s, c))
     total, comp = s[0], c[0]
     for s_r, c_r in rest:
         total, e = _two_sum(total, s_r)

@@ -1,9 +1,12 @@
 """Every number docs/RESULTS.md's 'Baselines a reviewer asks for' section quotes (issue 18) is
 recomputed here from the committed files under experiments/results/grasp_baselines/
 (per_seed.npz, run/checkpoint.npz, meta.json, tuned.json, tune_per_seed.npz,
-bench_2core_speed.json). Engineer R's tests/test_results_quoted.py covers the rest of the
+bench_2core_speed.json, bench_2core_shared_default.json, and ensemble_shared/: the rerun of
+ensemble_ts with shared heads beside SERN). It also holds grasp_baselines' command tests
+(bench entries, record-learn, run's refusals, merge). Engineer R's tests/test_results_quoted.py covers the rest of the
 page."""
 
+import dataclasses
 import json
 import re
 import shutil
@@ -81,8 +84,13 @@ def test_table_rows_are_the_summarys():
         return (f"{star}{fmt.format(scale * d['mean'])} [{fmt.format(scale * d['lower'])}, "
                 f"{fmt.format(scale * d['upper'])}]{star}")
 
+    # the table's ensemble ran M whole networks (made before --ensemble-heads existed; the
+    # layout is named in its row since shared heads became the default)
+    configs = json.loads((SRC / "meta.json").read_text())["learner_configs"]
+    assert configs["ensemble_ts"].get("ensemble_heads", "networks") == "networks"
     for n in s["learners"]:
         k = f"{knob[n][0]} = {knob[n][1]}" if n in knob else "no knob"
+        k += ", whole networks" if n == "ensemble_ts" else ""
         m = s["metrics"]
         cells = [f"{100 * m['explore_success']['mean'][n]:.1f}",
                  f"{100 * m['final_lowvar']['mean'][n]:.1f}",
@@ -306,7 +314,15 @@ def test_every_number_in_the_prose_is_checked():
                "1.09", "1.03", "1.12", "2.34", "2.24", "2.43", "3.71", "3.50", "3.83", "2.20",
                "2.03", "10.77", "1.85", "4.91", "0.95", "11.86", "5.70", "3.39", "1.38",
                "1.36", "1.55", "0.055", "+5.3", "3.0",
-               "1.2", "2.0", "4.1"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
+               "1.2", "2.0", "4.1",
+               # the shared-heads rerun (test_ensemble_shared_*) and its bench
+               # (test_bench_ratios_shared_default)
+               "+0.002", "+0.006", "+0.01", "+0.02", "+0.17", "+0.2", "+1.0", "-0.002",
+               "-0.02", "-0.07", "-0.1", "-0.10", "-0.16", "-0.23", "-0.4", "-0.5", "-1.0",
+               "-2.0", "-2.3", "0.00012", "0.0002", "0.017", "92.2", "93.1",
+               "0.67", "0.79", "0.91", "0.96", "1.01", "1.06", "1.16", "1.19", "1.23", "1.24",
+               "1.29", "1.3", "1.36", "1.39", "1.41", "1.60", "1.8", "11.6", "2.06", "2.12",
+               "2.23", "2.66", "3.40", "3.6", "3.61", "3.86", "3.87"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
     assert found <= allowed, sorted(found - allowed)
 
 
@@ -370,3 +386,377 @@ def test_record_learn_timing_reads_the_three_files(tmp_path, capsys):
                               str(tmp_path / "out2.json")])
     assert e.value.code == 2 and "--learn-run" in capsys.readouterr().err
     assert not (tmp_path / "out2.json").exists()
+
+
+def test_run_refuses_a_ray_unit_of_another_run_before_writing_meta(tmp_path, capsys,
+                                                                   monkeypatch):
+    """``run`` reads the --ray units' checkpoints too (run/units/object_*/checkpoint.npz,
+    what a Ray run leaves, also one stopped before any join): a unit of a reported object
+    with another fingerprint is refused in one line, exit 2, before meta.json is touched;
+    the same settings' unit (and a unit of an object not run) passes to the runner."""
+    from sern_jax import io
+    from sern_jax.grasp import learn_units, runner
+
+    argv = ["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds", "2",
+            "--rounds", "1", "--no-progress"]
+    specs, theta0 = grasp_baselines.hard_specs()
+    config = grasp_baselines.online_config(
+        grasp_baselines.learners(), {}, num_seeds=2, rounds=1, explore=20, regret_trials=0,
+        regret_grasps=0, backend="native")
+    unit = learn_units.unit_dir(tmp_path / "run", specs[0]) / "checkpoint.npz"
+    unit.parent.mkdir(parents=True)
+    other = dataclasses.replace(config, num_seeds=3)  # another run's unit
+    io.save_npz(unit, next_round=np.int64(1),
+                fingerprint=np.str_(runner.run_fingerprint(other, specs[:1], theta0)))
+    meta = json.dumps({"num_seeds": 99, "calls": [{"start_round": 0}]})
+    (tmp_path / "meta.json").write_text(meta)
+    with pytest.raises(SystemExit) as exc:
+        grasp_baselines.main(argv)
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1, err
+    assert "a --ray unit of" in err and unit.parent.name in err
+    assert (tmp_path / "meta.json").read_text() == meta
+    assert not (tmp_path / "run" / "checkpoint.npz").exists()
+
+    # control: this run's own unit, beside a unit of an object not run, is not refused
+    io.save_npz(unit, next_round=np.int64(1),
+                fingerprint=np.str_(runner.run_fingerprint(config, specs[:1], theta0)))
+    stray = learn_units.unit_dir(tmp_path / "run", specs[1]) / "checkpoint.npz"
+    stray.parent.mkdir(parents=True)
+    io.save_npz(stray, next_round=np.int64(1), fingerprint=np.str_("0123456789abcdef"))
+
+    def reached(config, specs, run_dir, theta0, progress):
+        raise RuntimeError("runner reached")
+
+    monkeypatch.setattr(grasp_baselines, "_run", reached)
+    with pytest.raises(RuntimeError, match="runner reached"):
+        grasp_baselines.main(argv)
+    assert json.loads((tmp_path / "meta.json").read_text())["num_seeds"] == 2
+
+
+def _fake_comparison(root, learners, rng, regret=True):
+    """A comparison's files as run/tune write them (2 objects, 3 seeds, 2 rounds)."""
+    from sern_jax import io
+
+    r1, o, q, s, e = 3, 2, len(learners), 3, 4
+    root.mkdir(parents=True)
+    (root / "run").mkdir()
+    arrays = {f: rng.random((r1, o, q, s)) for f in grasp_baselines.PER_SEED_FIELDS}
+    if not regret:
+        arrays["pseudo_regret"][:] = np.nan
+    io.save_npz(root / "run" / "checkpoint.npz", fingerprint=np.str_("0123456789abcdef"),
+                next_round=np.int64(r1), **arrays,
+                explore_action=rng.integers(0, 64, (r1, o, q, s, e)).astype(np.int32),
+                explore_reward=rng.integers(0, 2, (r1, o, s, q, e)).astype(np.int8))
+    same = {k: k for k in grasp_baselines._MERGE_SAME}
+    same.update(objects=["a", "b"], num_seeds=s, rounds=r1 - 1, regret_trials=2 * regret,
+                reference="sern")
+    meta = {**same, "learners": learners, "run_dir": str(root / "nowhere"),
+            "learner_configs": {n: {"k": n} for n in learners},
+            "hyperparameters": {"alpha": 0.02, "ensemble_size": 5}, "command": "old"}
+    (root / "meta.json").write_text(json.dumps(meta))
+    knobbed = [n for n in learners if n in grasp_baselines.GRID]
+    tps = {"lowvar_eval": rng.random((3, r1, o, len(knobbed), s)).astype(np.float32),
+           "explore_success": rng.random((3, r1, o, len(knobbed), s)).astype(np.float32)}
+    np.savez_compressed(root / "tune_per_seed.npz", **tps)
+    grid = {n: {"field": grasp_baselines.GRID[n][0], "settings": [1, 2, 3],
+                "scores": [float(x) for x in tps["lowvar_eval"][:, 1:, :, i].mean((1, 2, 3))],
+                "chosen": 1} for i, n in enumerate(knobbed)}
+    (root / "tuned.json").write_text(json.dumps(
+        {"objects": ["c"], "seeds": s, "rounds": r1 - 1, "explore": 20, "criterion": "x",
+         "learners": knobbed, "grid": grid, "command": "tune"}))
+    return arrays, tps
+
+
+def test_merge_replaces_learners_only_when_the_reference_is_bit_identical(tmp_path, capsys):
+    """merge: the rerun's ensemble_ts replaces the comparison's (per-seed file, tuning,
+    configs), every other learner is kept, and the rerun's sern must equal the
+    comparison's bit for bit in results, choices, rewards and tuning; a sern differing in
+    one number is refused in one line, exit 2, nothing written."""
+    from sern_jax import io
+
+    rng = np.random.default_rng(0)
+    out, new = tmp_path / "out", tmp_path / "new"
+    names = ["sern", "egreedy", "ensemble_ts"]
+    old, old_tps = _fake_comparison(out, names, rng)
+    fresh, fresh_tps = _fake_comparison(new, ["sern", "ensemble_ts"], rng)
+    # the rerun's sern is the comparison's (what independence of learners gives)
+    ck_old = io.load_npz(out / "run" / "checkpoint.npz")
+    ck_new = dict(io.load_npz(new / "run" / "checkpoint.npz"))
+    for f in grasp_baselines.PER_SEED_FIELDS + ("explore_action",):
+        ck_new[f][:, :, 0] = ck_old[f][:, :, 0]
+    ck_new["explore_reward"][..., 0, :] = ck_old["explore_reward"][..., 0, :]
+    for f in fresh_tps:
+        fresh_tps[f][:, :, :, 0] = old_tps[f][:, :, :, 0]
+    np.savez_compressed(new / "tune_per_seed.npz", **fresh_tps)
+    meta_new = json.loads((new / "meta.json").read_text())
+    meta_new.update(learner_configs={"sern": {"k": "sern"}, "ensemble_ts": {"k": "shared"}},
+                    hyperparameters={"alpha": 0.02, "ensemble_size": 10}, command="new")
+    (new / "meta.json").write_text(json.dumps(meta_new))
+
+    def write(ck):
+        io.save_npz(new / "run" / "checkpoint.npz", **ck)
+
+    # control first: one sern number differs -> refused, nothing written
+    bad = {k: np.array(v) for k, v in ck_new.items()}
+    bad["lowvar_eval"][2, 1, 0, 2] += 1e-7
+    write(bad)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    with pytest.raises(SystemExit) as exc:
+        grasp_baselines.main(["merge", "--out", str(out), "--merge-from", str(new)])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1, err
+    assert "sern lowvar_eval differs" in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+    write(ck_new)
+    grasp_baselines.main(["merge", "--out", str(out), "--merge-from", str(new)])
+    capsys.readouterr()
+    got = np.load(out / "per_seed.npz")
+    for f in grasp_baselines.PER_SEED_FIELDS:
+        np.testing.assert_array_equal(got[f][:, :, 2], fresh[f][:, :, 1].astype(np.float32))
+        np.testing.assert_array_equal(got[f][:, :, :2], old[f][:, :, :2].astype(np.float32))
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["learners"] == names and meta["command"] == "old"
+    assert meta["learner_configs"]["ensemble_ts"] == {"k": "shared"}
+    assert meta["hyperparameters"] == {"alpha": 0.02, "ensemble_size": 10}
+    part = meta["merged"][0]
+    assert part["learners"] == ["ensemble_ts"] and part["command"] == "new"
+    assert (out / part["run_dir"] / "checkpoint.npz").exists()
+    tuned = json.loads((out / "tuned.json").read_text())
+    assert tuned["grid"]["ensemble_ts"]["scores"] == json.loads(
+        (new / "tuned.json").read_text())["grid"]["ensemble_ts"]["scores"]
+    assert tuned["replaced"]["ensemble_ts"]["scores"] != tuned["grid"]["ensemble_ts"]["scores"]
+    assert set(tuned["resolution"]["learners"]) == {"sern", "egreedy", "ensemble_ts"}
+    tps = np.load(out / "tune_per_seed.npz")
+    np.testing.assert_array_equal(tps["lowvar_eval"][:, :, :, 2],
+                                  fresh_tps["lowvar_eval"][:, :, :, 1])
+    np.testing.assert_array_equal(tps["lowvar_eval"][:, :, :, :2],
+                                  old_tps["lowvar_eval"][:, :, :, :2])
+    # collect rebuilds the same per-seed file from the two checkpoints
+    first = dict(got.items())
+    grasp_baselines.collect(out)
+    capsys.readouterr()
+    again = np.load(out / "per_seed.npz")
+    for f in first:
+        np.testing.assert_array_equal(again[f], first[f])
+
+
+SHARED_DIR = SRC / "ensemble_shared"
+
+
+def _shared_rerun():
+    """(per-seed metrics of the table's run, of the shared-heads rerun, their metas)."""
+    pa, pb = (dict(np.load(d / "per_seed.npz")) for d in (SRC, SHARED_DIR))
+    ma, mb = (json.loads((d / "meta.json").read_text()) for d in (SRC, SHARED_DIR))
+    return (grasp_baselines.per_seed_metrics(pa, ma), grasp_baselines.per_seed_metrics(pb, mb),
+            ma, mb)
+
+
+def test_ensemble_shared_rerun_table_and_setup(tmp_path):
+    """The shared-heads rerun (ensemble_shared/): its summary and table rebuild from its
+    per-seed file, which is its checkpoint's; it ran sern and ensemble_ts with shared heads
+    at the tuned M on the comparison's objects, seeds, rounds and oracle; the section's
+    table rows are its summary's."""
+    for f in ("per_seed.npz", "meta.json"):
+        shutil.copy(SHARED_DIR / f, tmp_path / f)
+    grasp_baselines.summarize(tmp_path)
+    assert (tmp_path / "table.md").read_text() == (SHARED_DIR / "table.md").read_text()
+    (tmp_path / "run").mkdir()
+    shutil.copy(SHARED_DIR / "run" / "checkpoint.npz", tmp_path / "run" / "checkpoint.npz")
+    grasp_baselines.collect(tmp_path)
+    a, b = np.load(tmp_path / "per_seed.npz"), np.load(SHARED_DIR / "per_seed.npz")
+    for k in b:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    main = json.loads((SRC / "meta.json").read_text())
+    meta = json.loads((SHARED_DIR / "meta.json").read_text())
+    assert meta["learners"] == ["sern", "ensemble_ts"]
+    for k in grasp_baselines._MERGE_SAME:
+        assert meta[k] == main[k], k
+    assert meta["learner_configs"]["sern"] == main["learner_configs"]["sern"]
+    assert meta["learner_configs"]["ensemble_ts"] == {
+        "ensemble_size": 5, "bootstrap": "bernoulli", "bootstrap_p": 0.95,
+        "ensemble_heads": "shared"}
+    assert "ensemble_heads" not in main["learner_configs"]["ensemble_ts"]  # before the field
+    assert round(meta["calls"][0]["wall_s"]) == 357
+    s = json.loads((SHARED_DIR / "summary.json").read_text())
+    m = s["metrics"]
+    cells = {n: [f"{100 * m['explore_success']['mean'][n]:.1f}",
+                 f"{100 * m['final_lowvar']['mean'][n]:.1f}",
+                 f"{m['pseudo_regret_per_round']['mean'][n]:.2f}"] for n in s["learners"]}
+
+    def diff(metric, scale, fmt):
+        d = m[metric]["paired"][0]
+        assert d["name"] == "ensemble_ts - sern"
+        star = "**" if d["resolved"] else ""
+        return (f"{star}{fmt.format(scale * d['mean'])} [{fmt.format(scale * d['lower'])}, "
+                f"{fmt.format(scale * d['upper'])}]{star}")
+
+    rows = [(f"| sern (alpha = 0.02) | {cells['sern'][0]} | (reference) | "
+             f"{cells['sern'][1]} | (reference) | {cells['sern'][2]} | (reference) |"),
+            (f"| ensemble_ts (ensemble_size = 5, shared heads) | {cells['ensemble_ts'][0]} | "
+             f"{diff('explore_success', 100, '{:+.1f}')} | {cells['ensemble_ts'][1]} | "
+             f"{diff('final_lowvar', 100, '{:+.1f}')} | {cells['ensemble_ts'][2]} | "
+             f"{diff('pseudo_regret_per_round', 1, '{:+.2f}')} |")]
+    for row in rows:
+        assert row in SECTION, row
+    # Bonferroni over the table's ten comparisons and this one
+    text = " ".join(SECTION.split())
+    p11 = [m[k]["paired"][0]["pvalue"] * 11 for k in ("explore_success",
+                                                      "pseudo_regret_per_round")]
+    assert all(p < 0.05 for p in p11)
+    assert f"p × 11 = {p11[0]:.4f} and {p11[1]:.3f}" in text
+
+
+def test_ensemble_shared_rerun_tuning():
+    """M over 3, 5, 10 on the comparison's tuning objects, seeds and rounds; M = 5 and 10
+    equal on every tuning seed, the tie rule keeps 5; SERN's tuning in that call equals
+    the committed tuning bit for bit."""
+    t = json.loads((SHARED_DIR / "tuned.json").read_text())
+    main = json.loads((SRC / "tuned.json").read_text())
+    for k in ("objects", "seeds", "rounds", "explore", "criterion"):
+        assert t[k] == main[k], k
+    g = t["grid"]["ensemble_ts"]
+    assert g["settings"] == [3, 5, 10] and g["chosen"] == 5
+    assert list(grasp_baselines.GRID["ensemble_ts"][1]) == g["settings"]
+    lv = np.load(SHARED_DIR / "tune_per_seed.npz")["lowvar_eval"]
+    per_seed = lv[:, 1:, :, 1].mean(axis=1)
+    np.testing.assert_array_equal(per_seed[1], per_seed[2])
+    assert t["grid"]["sern"] == main["grid"]["sern"]
+    a, b = np.load(SRC / "tune_per_seed.npz"), np.load(SHARED_DIR / "tune_per_seed.npz")
+    for f in a:
+        np.testing.assert_array_equal(a[f][..., main["learners"].index("sern"), :],
+                                      b[f][..., 0, :], err_msg=f)
+    text = " ".join(SECTION.split())
+    scores = ", ".join(f"{100 * x:.1f}" for x in g["scores"][:2])
+    assert f"{scores} and {100 * g['scores'][2]:.1f} %" in text
+
+
+def test_ensemble_shared_against_whole_networks_and_sern_against_itself():
+    """The paired differences the section quotes: shared-heads rerun minus the table's
+    whole-network ensemble over the 20 seeds; at M = 5 on the tuning objects; and the
+    rerun's SERN minus the table's (not bit for bit: counts of differing choices)."""
+    from sern_jax import io, stats
+
+    a, b, ma, _ = _shared_rerun()
+    q = ma["learners"].index("ensemble_ts")
+    text = " ".join(SECTION.replace("−", "-").split())
+
+    def fmt(x, y, scale, digits):
+        d = stats.paired_differences((x - y)[None], names=["d"])[0]
+        assert not d.resolved
+        f = f"{{:+.{digits}f}}"
+        return (f"{f.format(scale * d.mean)} [{f.format(scale * d.lower)}, "
+                f"{f.format(scale * d.upper)}]")
+
+    for metric, scale, digits in (("explore_success", 100, 1), ("final_lowvar", 100, 1),
+                                  ("pseudo_regret_per_round", 1, 2)):
+        assert fmt(b[metric][1], a[metric][q], scale, digits) in text, metric
+    sern = [fmt(b[k][0], a[k][0], s, d) for k, s, d in (
+        ("explore_success", 100, 2), ("final_lowvar", 100, 2),
+        ("pseudo_regret_per_round", 1, 3))]
+    assert (f"{sern[0]} (exploration), {sern[1]} (final) and {sern[2]} (pseudo-regret)"
+            in text)
+    tuned = json.loads((SRC / "tuned.json").read_text())
+    lv_net = np.load(SRC / "tune_per_seed.npz")["lowvar_eval"]
+    lv_sh = np.load(SHARED_DIR / "tune_per_seed.npz")["lowvar_eval"]
+    net5 = lv_net[2, 1:, :, tuned["learners"].index("ensemble_ts")].mean(axis=(0, 1))
+    sh5 = lv_sh[1, 1:, :, 1].mean(axis=(0, 1))
+    assert f"at M = 5 on the tuning objects {fmt(sh5, net5, 100, 1)} points" in text
+    # SERN's own run-to-run differences, from the two checkpoints
+    ca = io.load_npz(SRC / "run" / "checkpoint.npz")
+    cb = io.load_npz(SHARED_DIR / "run" / "checkpoint.npz")
+    act_a, act_b = ca["explore_action"][1:, :, 0], cb["explore_action"][1:, :, 0]  # rounds 1..5
+    assert (act_a[0] == act_b[0]).all()  # round 1 (θ0's choices) identical
+    changed = act_a != act_b
+    objects = {ma["objects"][o] for o in np.nonzero(changed)[1]}
+    r1 = np.abs(ca["pseudo_regret"][1, :, 0] - cb["pseudo_regret"][1, :, 0])
+    assert f"{changed.sum()} of its {changed.size:,} exploration choices differ" in text
+    assert objects == {"triangular_prism"} and "all on triangular_prism" in text
+    assert f"up to {r1.max():.5f} on {(r1 > 0).sum()} of {r1.size}" in text
+
+
+def test_run_refuses_a_run_made_under_the_former_ensemble_default(tmp_path, capsys,
+                                                                  monkeypatch):
+    """The fingerprint holds the hyperparameters given, not defaults, so a run directory
+    made when ensemble_ts defaulted to whole networks has the fingerprint of today's
+    shared-heads default: ``run`` compares the learner configs meta.json recorded (a
+    missing ensemble_heads = networks) and refuses in one line, exit 2, nothing written;
+    a run recorded with shared heads resumes."""
+    from sern_jax import io
+    from sern_jax.grasp import runner
+
+    argv = ["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds", "2",
+            "--rounds", "1", "--no-progress"]
+    specs, theta0 = grasp_baselines.hard_specs()
+    config = grasp_baselines.online_config(
+        grasp_baselines.learners(), {}, num_seeds=2, rounds=1, explore=20, regret_trials=0,
+        regret_grasps=0, backend="native")
+    (tmp_path / "run").mkdir()
+    io.save_npz(tmp_path / "run" / "checkpoint.npz", next_round=np.int64(1),
+                fingerprint=np.str_(runner.run_fingerprint(config, specs[:1], theta0)))
+    old = {"ensemble_size": 3, "bootstrap": "bernoulli", "bootstrap_p": 0.95}
+    meta = json.dumps({"num_seeds": 99, "learner_configs": {"ensemble_ts": old}})
+    (tmp_path / "meta.json").write_text(meta)
+    with pytest.raises(SystemExit) as exc:
+        grasp_baselines.main(argv)
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1, err
+    assert "ensemble_heads = 'networks'" in err and "'shared'" in err
+    assert (tmp_path / "meta.json").read_text() == meta
+
+    (tmp_path / "meta.json").write_text(json.dumps(
+        {"num_seeds": 99, "learner_configs": {"ensemble_ts": {**old,
+                                                               "ensemble_heads": "shared"}}}))
+
+    def reached(config, specs, run_dir, theta0, progress):
+        raise RuntimeError("runner reached")
+
+    monkeypatch.setattr(grasp_baselines, "_run", reached)
+    with pytest.raises(RuntimeError, match="runner reached"):
+        grasp_baselines.main(argv)
+
+
+def test_bench_ratios_shared_default():
+    """The Speed paragraph's re-measurement with shared heads the default
+    (bench_2core_shared_default.json): CPU ratios per repeat against the same repeat's
+    SERN, median [min, max]; every shared-heads M within 1.5x on every repeat, whole
+    networks over it; the wall ratios' spread at that load."""
+    b = json.loads((SRC / "bench_2core_shared_default.json").read_text())
+    lr = b["learners"]
+    text = " ".join(SECTION.split())
+    assert b["machine"]["cores_usable"] == 2 and b["repeats"] == 5 and b["copies"] == [6, 5]
+    assert "--copies 6,5 --repeats 5" in b["command"]
+    assert "--learners " + b["command"].split("--learners ")[1].split(" ")[0] in text
+    start, end = b["load_average_start"][0], b["load_average_end"][0]
+    assert f"load average {start:.1f} at the start and {end:.1f} at the end" in text
+    heads = {"ensemble_ts": ("shared", 3), "ensemble_ts:ensemble_size=5": ("shared", 5),
+             "ensemble_ts:ensemble_size=10": ("shared", 10),
+             "ensemble_ts:ensemble_heads=networks": ("networks", 3),
+             "ensemble_ts:ensemble_heads=networks:ensemble_size=5": ("networks", 5)}
+    for label, (layout, m) in heads.items():
+        c = lr[label]["config"]
+        assert (c["ensemble_heads"], c["ensemble_size"]) == (layout, m), label
+
+    def ratios(label, col):  # col 1: process CPU, 0: wall
+        t, ref = np.asarray(lr[label]["times"]), np.asarray(lr["sern"]["times"])
+        return t[:, [0, 2, 3], col].sum(1) / ref[:, [0, 2, 3], col].sum(1)
+
+    for label in ("greedy", "neural_lints", "neural_linucb", *heads):
+        r = ratios(label, 1)
+        quoted = f"{np.median(r):.2f}× [{r.min():.2f}, {r.max():.2f}]"
+        assert quoted in text, (label, quoted)
+        assert f"{lr[label]['vs_sern_cpu_median']:.2f}" == f"{np.median(r):.2f}"
+        if label.startswith("ensemble_ts"):
+            assert (r.max() <= 1.5) == (heads[label][0] == "shared"), label
+    assert ratios("neural_lints", 1).max() <= 1.5 and ratios("neural_linucb", 1).max() <= 1.5
+    g, e5 = ratios("greedy", 0), ratios("ensemble_ts:ensemble_size=5", 0)
+    assert f"greedy {g.min():.2f}× to {g.max():.2f}× SERN's round" in text
+    assert (f"M = 5 {e5.min():.2f}× to {e5.max():.2f}×, median {np.median(e5):.2f}×"
+            in text)
+    u = lr["ensemble_ts:ensemble_size=5"]["update_cpu_s"], lr["sern"]["update_cpu_s"]
+    assert f"{u[0]:.2f} against SERN's {u[1]:.2f}" in text
+    # the idle-timing paragraph's 'about 1.3x ... instead of 3.6x'
+    net5 = ratios("ensemble_ts:ensemble_heads=networks:ensemble_size=5", 1)
+    assert (f"about {np.median(ratios('ensemble_ts:ensemble_size=5', 1)):.1f}× SERN's round "
+            f"instead of {np.median(net5):.1f}×") in text

@@ -299,8 +299,8 @@ def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | Non
     recorded = out / "meta.json"
     if saved is not None and recorded.exists():
         before = json.loads(recorded.read_text()).get("learner_configs", {})
-        for name in config.policies:
-            was = {**FORMER_DEFAULTS.get(name, {}), **before.get(name, {})}
+        for name in (n for n in config.policies if n in before):  # recorded learners
+            was = {**FORMER_DEFAULTS.get(name, {}), **before[name]}
             now = dataclasses.asdict(config.learner_config(name))
             for field in sorted(set(was) & set(now)):
                 if was[field] != now[field]:

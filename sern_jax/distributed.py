@@ -356,6 +356,26 @@ def _check_feasible(ray, config: RayConfig) -> None:
                              f"{key}s (the largest has {most:g})")
 
 
+def _stop(ray, refs: list, timeout: float = 30.0) -> None:
+    """Stops the other tasks once a unit failed for good, quietly.
+
+    They are cancelled with ``force=True``: a running one's worker process is killed, as a
+    lost worker would be (its unit file is written atomically, so a killed task leaves no
+    partial unit), instead of a KeyboardInterrupt raised inside running JAX or MuJoCo code,
+    which could abort the worker with a "Fatal Python error: Aborted" that Ray forwards to
+    the driver's stderr. Their outcomes are then collected (up to ``timeout`` seconds), so
+    that Ray logs no "Unhandled error" for a sibling that had failed too.
+    """
+    for ref in refs:
+        ray.cancel(ref, force=True)
+    done, _ = ray.wait(list(refs), num_returns=len(refs), timeout=timeout)
+    for ref in done:
+        try:
+            ray.get(ref)
+        except Exception:  # noqa: BLE001, S110 - cancelled or failed: already reported
+            pass
+
+
 def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLike, *,
               log: Callable[[str], None] = print, progress: bool = True,
               desc: str = "units") -> dict[str, float]:
@@ -412,8 +432,7 @@ def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLi
                     try:
                         seconds[unit.name] = ray.get(ref)
                     except Exception as exc:  # noqa: BLE001 - any task failure is one line
-                        for other in pending:
-                            ray.cancel(other)
+                        _stop(ray, pending)
                         raise UnitFailedError(unit.name,
                                               _describe(exc, config.max_retries)) from None
                     bar.update(1)

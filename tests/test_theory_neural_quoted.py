@@ -1,6 +1,8 @@
 """The figures docs/THEORY.md quotes for the neural checks (t3_neural_inequality,
 alg1_neural_argmax, t4_neural_bound) are those of the committed JSON reports of `sern check`
-runs (experiments/results/theory_neural/check_*.json)."""
+runs (experiments/results/theory_neural/check_*.json), whose mean cells are Student-t
+intervals over seeds (n − 1 dof); check_t3_alpha05_superseded_full.json, the superseded
+α = 0.5 version of t3, predates that and holds normal (z) intervals."""
 
 import json
 import math
@@ -8,9 +10,11 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORT = ROOT / "experiments" / "results" / "theory_neural" / "check_t3_alg1_full.json"
+SUPERSEDED = REPORT.parent / "check_t3_alpha05_superseded_full.json"
 
 
 def _cells(doc, name):
@@ -23,10 +27,22 @@ def _num(note, label):
 
 
 def _t99(cell, n):
-    """Student t 99% (n − 1 dof) from a framework.mean_cell cell: its mean and its two-sided
-    normal-theory upper end give se = (upper − mean)/z_0.995."""
+    """The two-sided Student t 99% interval (n − 1 dof) of a framework.mean_cell 'le' cell,
+    from its n and se; the report's stored two-sided (upper) end must be that interval's."""
     from scipy import stats
 
+    assert cell["n"] == n and cell["direction"] == "le"
+    h = stats.t.ppf(0.995, n - 1) * cell["se"]
+    assert cell["upper"] == pytest.approx(cell["statistic"] + h, rel=1e-12)
+    return cell["statistic"] - h, cell["statistic"] + h
+
+
+def _t99_from_z(cell, n):
+    """Student t 99% (n − 1 dof) from a cell of the earlier normal-theory framework (no n, se
+    stored): its mean and two-sided z upper end give se = (upper − mean)/z_0.995."""
+    from scipy import stats
+
+    assert "se" not in cell
     se = (cell["upper"] - cell["statistic"]) / stats.norm.ppf(0.995)
     h = stats.t.ppf(0.995, n - 1) * se
     return cell["statistic"] - h, cell["statistic"] + h
@@ -71,7 +87,11 @@ def test_t3_figures_match_the_reports():
     assert _cells(mut, "t3_neural_inequality")["verdict"] == "FAIL"
     assert _cells(mutq, "t3_neural_inequality")["verdict"] == "FAIL"
     assert mq_path < 0  # the quick-size control fails too
-    old = _cells(json.loads(REPORT.read_text()), "t3_neural_inequality")
+    old = _cells(json.loads(SUPERSEDED.read_text()), "t3_neural_inequality")
+    assert "α=0.5" in old["cells"][0]["label"]
+    # the regenerated t3 + alg1 full report holds today's α = 0.1 t3, equal to check_t3_full's
+    t3_again = _cells(json.loads(REPORT.read_text()), "t3_neural_inequality")
+    assert [c["statistic"] for c in t3_again["cells"]] == [c["statistic"] for c in t3["cells"]]
     quoted = [
         f"min (rhs − R_t)/rhs = {pathwise['statistic']:.3f} ≥ 0, rhs below the trivial g·t on "
         f"{_num(pn, 'on'):.1f}% of seed-checkpoints; paper's form VACUOUS (mean bound "
@@ -98,7 +118,7 @@ def test_t3_figures_match_the_reports():
     ]
     # the superseded α = 0.5 figures, from check_t3_alg1_full.json (t interval: contains 0)
     oi = old["cells"][2]
-    olo, ohi = _t99(oi, 64)
+    olo, ohi = _t99_from_z(oi, 64)
     assert olo < 0 < ohi
     quoted.append(f"gave {_num(oi['note'], 'ratio'):.3f}, +{oi['statistic']:.1f} "
                   f"[{_m(olo, '.2f')}, {ohi:.2f}] (full; its quick-size run was not kept)")
@@ -163,6 +183,14 @@ def test_t4_full_size_figures_match_the_report():
     t4 = _cells(doc, "t4_neural_bound")
     assert t4["verdict"] == "VACUOUS" and t4["seeds"] == 64
     learned, frozen = t4["cells"]
+    from scipy import stats
+
+    # Student t over the 64 seeds: one-sided 99% lower end, two-sided 99% upper end
+    assert learned["n"] == 64
+    assert learned["lower"] == pytest.approx(
+        learned["statistic"] - stats.t.ppf(0.99, 63) * learned["se"], rel=1e-12)
+    assert learned["upper"] == pytest.approx(
+        learned["statistic"] + stats.t.ppf(0.995, 63) * learned["se"], rel=1e-12)
     mant, exp = f"{learned['bound']:.2e}".split("e+")
     sup = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
     quoted = [f"mean R_T {learned['statistic']:.1f} [{learned['lower']:.1f}, "

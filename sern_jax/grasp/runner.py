@@ -205,6 +205,17 @@ class OnlineConfig:
 
     def fingerprint(self) -> str:
         d = dataclasses.asdict(self)
+        if "ensemble_ts" in self.policies:
+            # ensemble_ts's layout defaulted to whole networks until 0c123bc made shared heads
+            # the default; ``hyper`` drops defaults, so a whole-network run made then and a
+            # shared-heads run made now would share a fingerprint and resume into each other.
+            # Fingerprint "networks" as absent (those old directories keep theirs) and spell
+            # "shared" out.
+            hyper = dict(d["hyper"])
+            hyper.pop("ensemble_heads", None)
+            if self.learner_config("ensemble_ts").ensemble_heads == "shared":
+                hyper["ensemble_heads"] = "shared"
+            d["hyper"] = tuple(sorted(hyper.items()))
         if not d["hyper"]:
             del d["hyper"]  # runs from before the field keep their fingerprint
         if not d["regret_grasps"]:

@@ -732,3 +732,38 @@ def test_seed_subset_equals_those_seeds_of_the_full_run(tiny_theta0, spec, tmp_p
     with pytest.raises(ValueError, match="different learning run"):  # not the full run's dir
         runner.run(config, [spec], tmp_path / "full", theta0=tiny_theta0, progress=False,
                    log=_quiet, seed_indices=(1, 3))
+
+
+def test_fingerprint_separates_the_ensemble_layouts_and_keeps_old_whole_network_runs():
+    """ensemble_ts's default layout changed (whole networks -> shared heads) and the
+    fingerprint drops defaults, so without care an old whole-network run directory would be
+    resumed by today's shared-heads run. Today's default must differ from
+    ``--ensemble-heads networks``, and the latter must keep the fingerprint such directories
+    were written with (the formula of before the change: hyper without ensemble_heads)."""
+    import hashlib
+    import json
+
+    base = dict(policies=("sern", "ensemble_ts"), num_seeds=2, rounds=2, explore=2)
+    shared = runner.OnlineConfig(**base)
+    networks = runner.OnlineConfig(**base, hyper={"ensemble_heads": "networks"})
+    explicit = runner.OnlineConfig(**base, hyper={"ensemble_heads": "shared"})
+    assert shared.learner_config("ensemble_ts").ensemble_heads == "shared"
+    assert shared.fingerprint() == explicit.fingerprint()
+    assert shared.fingerprint() != networks.fingerprint()
+
+    d = dataclasses.asdict(networks)
+    d["hyper"] = tuple(kv for kv in d["hyper"] if kv[0] != "ensemble_heads")
+    if not d["hyper"]:
+        del d["hyper"]
+    del d["regret_grasps"]  # 0, dropped as fingerprint() does
+    old = hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+    assert networks.fingerprint() == old
+    assert shared.fingerprint() != old  # the bug: today's default resumed an old directory
+    # control: other settings still change it, and runs without ensemble_ts are untouched
+    assert runner.OnlineConfig(**{**base, "num_seeds": 3},
+                               hyper={"ensemble_heads": "networks"}).fingerprint() != old
+    plain = runner.OnlineConfig(policies=("sern",), num_seeds=2, rounds=2, explore=2)
+    d = dataclasses.asdict(plain)
+    del d["hyper"], d["regret_grasps"]
+    assert plain.fingerprint() == hashlib.sha256(
+        json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]

@@ -446,6 +446,38 @@ _MERGE_SAME = ("objects", "num_seeds", "rounds", "explore", "evaluate", "eval_po
                "theta0_fingerprint", "physics", "reference")
 
 
+def merged_tuning(out: Path, new: Path, replaced) -> tuple[dict, dict]:
+    """``tuned.json`` and ``tune_per_seed.npz`` of ``out`` with the ``replaced`` learners'
+    tuning taken from ``new`` (a ``tune --policies sern,<learners>`` into another --out),
+    the earlier choice kept under ``replaced``; nothing written. Refused (``MergeError``)
+    unless the tuning objects, seeds, rounds, explore and criterion agree and the reference
+    learner's tuning per-seed figures are equal bit for bit (what :func:`merge` checks; the
+    rerun comparison of all learners reads such a file as its tuning)."""
+    tuned, tuned_new = (json.loads((d / "tuned.json").read_text()) for d in (out, new))
+    tps, tps_new = (dict(np.load(d / "tune_per_seed.npz")) for d in (out, new))
+    for key in ("objects", "seeds", "rounds", "explore", "criterion"):
+        if tuned.get(key) != tuned_new.get(key):
+            raise MergeError(f"--merge-from {new}: tuning {key} differs")
+    q_ref, p_ref = tuned["learners"].index(REFERENCE), tuned_new["learners"].index(REFERENCE)
+    for f in tps:
+        if not _same(tps_new[f][:, :, :, p_ref], tps[f][:, :, :, q_ref]):
+            raise MergeError(f"--merge-from {new}: {REFERENCE}'s tuning {f} differs from "
+                             "the comparison's: rerun every learner's tuning together")
+    for name in replaced:
+        q, p = tuned["learners"].index(name), tuned_new["learners"].index(name)
+        for f in tps:
+            tps[f][:, :, :, q] = tps_new[f][:, :, :, p]
+        tuned.setdefault("replaced", {})[name] = {
+            **tuned["grid"][name], "why": "rerun with another default (merge)",
+            "tune_per_seed": "the earlier tune_per_seed.npz, in git history"}
+        tuned["grid"][name] = tuned_new["grid"][name]
+    tuned["merged"] = {"learners": list(replaced), "command": tuned_new.get("command"),
+                       "machine": tuned_new.get("machine"), "wall_s": tuned_new.get("wall_s"),
+                       "reference_tuning_identical": True}
+    tuned["resolution"] = tuning_resolution(tps["lowvar_eval"], tuned)
+    return tuned, tps
+
+
 def merge(out: Path, new: Path) -> dict:
     """Replaces learners of the comparison in ``out`` by their rerun in ``new`` (a ``tune``
     and ``run`` of ``--policies sern,<learners>`` into another --out, e.g. with a new
@@ -463,8 +495,6 @@ def merge(out: Path, new: Path) -> dict:
     from sern_jax import io
 
     meta, meta_new = (json.loads((d / "meta.json").read_text()) for d in (out, new))
-    tuned, tuned_new = (json.loads((d / "tuned.json").read_text()) for d in (out, new))
-    tps, tps_new = (dict(np.load(d / "tune_per_seed.npz")) for d in (out, new))
     for key in _MERGE_SAME:
         if meta.get(key) != meta_new.get(key):
             raise MergeError(f"--merge-from {new}: {key} differs ({meta_new.get(key)!r}, "
@@ -476,14 +506,7 @@ def merge(out: Path, new: Path) -> dict:
                          f"learners of the comparison {meta['learners']}")
     if meta_new["learner_configs"][REFERENCE] != meta["learner_configs"][REFERENCE]:
         raise MergeError(f"--merge-from {new}: {REFERENCE}'s hyperparameters differ")
-    for key in ("objects", "seeds", "rounds", "explore", "criterion"):
-        if tuned.get(key) != tuned_new.get(key):
-            raise MergeError(f"--merge-from {new}: tuning {key} differs")
-    q_ref, p_ref = tuned["learners"].index(REFERENCE), tuned_new["learners"].index(REFERENCE)
-    for f in tps:
-        if not _same(tps_new[f][:, :, :, p_ref], tps[f][:, :, :, q_ref]):
-            raise MergeError(f"--merge-from {new}: {REFERENCE}'s tuning {f} differs from "
-                             "the comparison's: rerun every learner's tuning together")
+    tuned, tps = merged_tuning(out, new, replaced)
     run_name = "run_" + "_".join(replaced)
     ckpt = io.load_npz(new / "run" / "checkpoint.npz")
     # the reference learner's results are compared before anything is written
@@ -508,20 +531,9 @@ def merge(out: Path, new: Path) -> dict:
     io.save_npz(out / run_name / "checkpoint.npz", **ckpt)
     for name in replaced:
         meta["learner_configs"][name] = meta_new["learner_configs"][name]
-        q, p = tuned["learners"].index(name), tuned_new["learners"].index(name)
-        for f in tps:
-            tps[f][:, :, :, q] = tps_new[f][:, :, :, p]
-        tuned.setdefault("replaced", {})[name] = {
-            **tuned["grid"][name], "why": "rerun with another default (merge)",
-            "tune_per_seed": "the earlier tune_per_seed.npz, in git history"}
-        tuned["grid"][name] = tuned_new["grid"][name]
     for field, value in meta_new["hyperparameters"].items():
         if field in {GRID[n][0] for n in replaced if n in GRID}:
             meta["hyperparameters"][field] = value
-    tuned["merged"] = {"learners": replaced, "command": tuned_new.get("command"),
-                       "machine": tuned_new.get("machine"), "wall_s": tuned_new.get("wall_s"),
-                       "reference_tuning_identical": True}
-    tuned["resolution"] = tuning_resolution(tps["lowvar_eval"], tuned)
     np.savez_compressed(out / "tune_per_seed.npz", **tps)
     (out / "tuned.json").write_text(json.dumps(tuned, indent=1, default=str))
     meta.setdefault("merged", []).append({

@@ -1,8 +1,10 @@
 """Every number docs/RESULTS.md's 'Baselines a reviewer asks for' section quotes (issue 18) is
 recomputed here from the committed files under experiments/results/grasp_baselines/
-(per_seed.npz, run/checkpoint.npz, meta.json, tuned.json, tune_per_seed.npz,
-bench_2core_speed.json, bench_2core_shared_default.json, and ensemble_shared/: the rerun of
-ensemble_ts with shared heads beside SERN). It also holds grasp_baselines' command tests
+(per_seed.npz, run/checkpoint.npz, meta.json, device.log, tuned.json, tune_per_seed.npz: the
+rerun of all eleven learners with ensemble_ts's shared heads; bench_2core_speed.json,
+bench_2core_shared_default.json; ensemble_shared/: the earlier run of ensemble_ts with shared
+heads beside SERN, and its tuning; whole_networks_175aa72/: the table the rerun replaced, with
+ensemble_ts's whole networks). It also holds grasp_baselines' command tests
 (bench entries, record-learn, run's refusals, merge). Engineer R's tests/test_results_quoted.py covers the rest of the
 page."""
 
@@ -21,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "experiments" / "results" / "grasp_baselines"
 DOC = (ROOT / "docs" / "RESULTS.md").read_text()
 SECTION = DOC[DOC.index("## Baselines a reviewer asks for"):DOC.index("## Sim-to-sim transfer")]
+OLD = SRC / "whole_networks_175aa72"  # the replaced table (ensemble_ts: M whole networks)
 
 
 def _pct(x):
@@ -44,16 +47,19 @@ def test_summary_and_table_rebuild_from_the_per_seed_file(summary):
     assert s["num_seeds"] == 20 and s["rounds"] == 5 and s["rounds_planned"] == 5
 
 
-def test_per_seed_file_is_the_runs_checkpoint(tmp_path):
-    """collect() turns the committed run checkpoint into the committed per-seed file."""
-    shutil.copy(SRC / "meta.json", tmp_path / "meta.json")
+@pytest.mark.parametrize("src", [SRC, OLD], ids=["rerun", "whole_networks_175aa72"])
+def test_per_seed_file_is_the_runs_checkpoint(tmp_path, src):
+    """collect() turns the committed run checkpoint into the committed per-seed file (and
+    the replaced table's summary and table rebuild from its per-seed file)."""
+    shutil.copy(src / "meta.json", tmp_path / "meta.json")
     (tmp_path / "run").mkdir()
-    shutil.copy(SRC / "run" / "checkpoint.npz", tmp_path / "run" / "checkpoint.npz")
+    shutil.copy(src / "run" / "checkpoint.npz", tmp_path / "run" / "checkpoint.npz")
     grasp_baselines.collect(tmp_path)
-    a, b = np.load(tmp_path / "per_seed.npz"), np.load(SRC / "per_seed.npz")
+    a, b = np.load(tmp_path / "per_seed.npz"), np.load(src / "per_seed.npz")
     assert set(a) == set(b)
     for k in a:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    assert (tmp_path / "table.md").read_text() == (src / "table.md").read_text()
 
 
 def test_setup_the_section_states():
@@ -64,10 +70,23 @@ def test_setup_the_section_states():
     assert (meta["num_seeds"], meta["rounds"], meta["explore"], meta["evaluate"]) == (20, 5, 20, 5)
     assert (meta["regret_trials"], meta["regret_grasps"]) == (2, 1)
     assert meta["physics"]["scene"]["finger_force"] == 20.0
+    assert len(meta["calls"]) == 1
     call = meta["calls"][0]
     assert call["finished"] and call["start_round"] == 0
-    assert round(call["wall_s"]) == 495 and round(call["timings"]["oracle"]) == 138
-    assert "495 s" in SECTION and "138 s" in SECTION
+    assert round(call["wall_s"]) == 499 and round(call["timings"]["oracle"]) == 116
+    assert meta["learner_configs"]["ensemble_ts"]["ensemble_heads"] == "shared"
+    assert meta["host"]["cores_usable"] == 16 and meta["jax"]["backend"] == "gpu"
+    log = (SRC / "device.log").read_text()
+    process = int(re.search(r"run rc 0 in (\d+) s", log).group(1))
+    assert "NVIDIA H100" in log and "--seeds 20 --regret-trials 2 --regret-grasps 1" in log
+    text = " ".join(SECTION.split())
+    assert (f"the comparison itself took {round(call['wall_s'])} s" in text
+            and f"The comparison took {round(call['wall_s'])} s on the H100 machine (the oracle "
+            f"{round(call['timings']['oracle'])} s of it; {process} s for the whole process" in text)
+    old = json.loads((OLD / "meta.json").read_text())["calls"][0]
+    assert (round(old["wall_s"]), round(old["timings"]["oracle"])) == (495, 138)
+    assert "earlier table's took 495 s (the oracle 138 s)" in text
+    assert "495 s on the same kind of machine" in text
     for name in meta["objects"]:
         assert name in SECTION
 
@@ -84,13 +103,13 @@ def test_table_rows_are_the_summarys():
         return (f"{star}{fmt.format(scale * d['mean'])} [{fmt.format(scale * d['lower'])}, "
                 f"{fmt.format(scale * d['upper'])}]{star}")
 
-    # the table's ensemble ran M whole networks (made before --ensemble-heads existed; the
-    # layout is named in its row since shared heads became the default)
+    # the table's ensemble ran M shared heads (the default since the rerun; named in its row)
     configs = json.loads((SRC / "meta.json").read_text())["learner_configs"]
-    assert configs["ensemble_ts"].get("ensemble_heads", "networks") == "networks"
+    assert configs["ensemble_ts"]["ensemble_heads"] == "shared"
+    assert configs["ensemble_ts"]["ensemble_size"] == knob["ensemble_ts"][1]
     for n in s["learners"]:
         k = f"{knob[n][0]} = {knob[n][1]}" if n in knob else "no knob"
-        k += ", whole networks" if n == "ensemble_ts" else ""
+        k += ", shared heads" if n == "ensemble_ts" else ""
         m = s["metrics"]
         cells = [f"{100 * m['explore_success']['mean'][n]:.1f}",
                  f"{100 * m['final_lowvar']['mean'][n]:.1f}",
@@ -111,33 +130,39 @@ def test_quoted_numbers(summary):
     final = {d["name"].split(" - ")[0]: d for d in m["final_lowvar"]["paired"]}
     explore = {d["name"].split(" - ")[0]: d for d in m["explore_success"]["paired"]}
     regret = {d["name"].split(" - ")[0]: d for d in m["pseudo_regret_per_round"]["paired"]}
-    # final success: SERN 93.9; simple peers within -1.6..+0.4, intervals in [-3.2, +1.8]
-    assert _pct(m["final_lowvar"]["mean"]["sern"]) == 93.9
+    # final success: SERN 93.8; simple peers within -1.5..+0.5, intervals in [-3.1, +1.9]
+    assert _pct(m["final_lowvar"]["mean"]["sern"]) == 93.8 and "SERN ends at 93.8 %" in SECTION
     simple = ("greedy", "egreedy", "egreedy_decay", "ensemble_ts", "sern_decay", "sern_log",
               "normalized", "neural_lints")
     assert not any(final[n]["resolved"] for n in simple)
     assert (_pct(min(final[n]["mean"] for n in simple)),
-            _pct(max(final[n]["mean"] for n in simple))) == (-1.6, 0.4)
+            _pct(max(final[n]["mean"] for n in simple))) == (-1.5, 0.5)
     assert (_pct(min(final[n]["lower"] for n in simple)),
-            _pct(max(final[n]["upper"] for n in simple))) == (-3.2, 1.8)
+            _pct(max(final[n]["upper"] for n in simple))) == (-3.1, 1.9)
     lints = final["neural_lints"]
-    assert (_pct(lints["lower"]), _pct(lints["upper"]), round(lints["pvalue_holm"], 2)) == (
-        -3.0, -0.2, 0.24)
+    assert (_pct(lints["mean"]), _pct(lints["lower"]), _pct(lints["upper"]),
+            round(lints["pvalue_holm"], 2)) == (-1.5, -2.9, -0.1, 0.29)
     assert {n for n, d in final.items() if d["resolved"]} == {"neural_linucb", "neural_ucb"}
     assert (_pct(final["neural_linucb"]["mean"]), _pct(final["neural_ucb"]["mean"])) == (
-        -3.8, -7.6)
+        -3.6, -7.6)
+    text = " ".join(SECTION.replace("−", "-").split())
+    assert ("within -1.5 to +0.5 points, every interval inside [-3.1, +1.9] (Neural-Linear "
+            "Thompson's, -1.5 [-2.9, -0.1], excludes 0 before the correction, Holm p = 0.29). "
+            "Neural-Linear UCB (-3.6) and NeuralUCB (-7.6)") in text
     # exploration: SERN 86.2; greedy +2.1, ensemble +1.9, egreedy +1.3 (resolved); the costly
     assert _pct(m["explore_success"]["mean"]["sern"]) == 86.2
     for n, v in (("greedy", 2.1), ("ensemble_ts", 1.9), ("egreedy", 1.3)):
         assert _pct(explore[n]["mean"]) == v and explore[n]["resolved"]
-    for n, v in (("normalized", -10.1), ("sern_log", -10.7), ("neural_ucb", -15.4)):
+    for n, v in (("normalized", -10.1), ("sern_log", -10.7), ("neural_ucb", -15.5)):
         assert _pct(explore[n]["mean"]) == v and explore[n]["resolved"]
+    assert "NeuralUCB (−15.5)" in SECTION and "SERN's exploration grasps succeed 86.2 %" in text
     # pseudo-regret: SERN 0.84; greedy / ensemble about 0.6 fewer (resolved), egreedy 0.38
     assert round(m["pseudo_regret_per_round"]["mean"]["sern"], 2) == 0.84
     for n in ("greedy", "ensemble_ts"):
         assert round(regret[n]["mean"], 1) == -0.6 and regret[n]["resolved"]
     assert round(regret["egreedy"]["mean"], 2) == -0.38 and not regret["egreedy"]["resolved"]
     assert round(s["pseudo_regret_by_round"]["greedy"]["mean"][4], 2) == -1.69
+    assert "SERN loses 0.84 expected successes" in text and "greedy -1.69 in round 5" in text
 
 
 def test_round_zero_and_tuning_figures():
@@ -171,9 +196,29 @@ def test_round_zero_and_tuning_figures():
         spreads_1[n] = round(100 * (scores.max() - scores.min()), 1)
     assert tuned["grid"]["sern"]["chosen"] == 0.02 and tuned["grid"]["egreedy"]["chosen"] == 0.05
     assert tuned["grid"]["sern"]["settings"][1] == 0.05  # the paper's α, not chosen
-    assert (spreads["neural_linucb"], spreads["ensemble_ts"]) == (7, 9)
-    others = [v for n, v in spreads_1.items() if n not in ("neural_linucb", "ensemble_ts")]
+    assert spreads["neural_linucb"] == 7
+    others = [v for n, v in spreads_1.items() if n != "neural_linucb"]
     assert min(others) == 0.3 and round(max(others)) == 3  # "0.3–3 points"
+    assert "0.3–3 points for every learner but the UCB width (7)" in SECTION
+    # the tuning the rerun read: the replaced table's, ensemble_ts's from ensemble_shared/
+    old_t = json.loads((OLD / "tuned.json").read_text())
+    shared_t = json.loads((SRC / "ensemble_shared" / "tuned.json").read_text())
+    assert tuned["learners"] == old_t["learners"]
+    assert tuned["grid"]["ensemble_ts"] == shared_t["grid"]["ensemble_ts"]
+    assert tuned["replaced"]["ensemble_ts"]["settings"] == old_t["grid"]["ensemble_ts"]["settings"]
+    for n in tuned["learners"]:
+        if n != "ensemble_ts":
+            assert tuned["grid"][n] == old_t["grid"][n], n
+    told, tsh = np.load(OLD / "tune_per_seed.npz"), np.load(SRC / "ensemble_shared" / "tune_per_seed.npz")
+    q = tuned["learners"].index("ensemble_ts")
+    for f in told:
+        keep = [i for i in range(len(tuned["learners"])) if i != q]
+        np.testing.assert_array_equal(np.load(SRC / "tune_per_seed.npz")[f][..., keep, :],
+                                      told[f][..., keep, :], err_msg=f)
+        np.testing.assert_array_equal(np.load(SRC / "tune_per_seed.npz")[f][..., q, :],
+                                      tsh[f][..., 1, :], err_msg=f)
+    assert grasp_baselines.tuned_values(SRC, False) == {
+        g["field"]: g["chosen"] for g in tuned["grid"].values()}
     # sern_log's α at the tuned α0 = 1 and T = 100: α0 / ln(T^p) with p = 0.3
     assert tuned["grid"]["sern_log"]["chosen"] == 1.0 and round(1 / np.log(100 ** 0.3), 2) == 0.72
     r0 = t[0, 0].mean(axis=(1, 2))  # θ0 on the tuning objects (every learner, setting 0)
@@ -287,8 +332,10 @@ def test_tuning_resolution():
     smallest = min(res, key=lambda n: res[n]["pvalue"])
     assert smallest == "neural_linucb" and round(res[smallest]["pvalue"], 3) == 0.055
     assert round(100 * res[smallest]["mean"], 1) == 5.3
-    need = sorted(r["seeds_for_power"] for r in res.values())
-    assert (need[0], need[-1], int(np.median(need))) == (4, 869, 18)
+    assert res["ensemble_ts"]["mean"] == 0 and res["ensemble_ts"]["seeds_for_power"] is None
+    need = sorted(r["seeds_for_power"] for r in res.values() if r["seeds_for_power"])
+    assert len(need) == 8 and (need[0], need[-1], int(np.median(need))) == (4, 869, 17)
+    assert res == json.loads(json.dumps(tuned["resolution"]["learners"]))
     # an independent check of one row: scipy's paired t-test on the per-seed values
     from scipy import stats as sps
 
@@ -296,7 +343,8 @@ def test_tuning_resolution():
     x = t[:, 1:, :, q, :].mean(axis=(1, 2))  # [setting, S]
     assert round(sps.ttest_rel(x[2], x[1]).pvalue, 3) == 0.055
     text = " ".join(SECTION.split())
-    for s in ("the smallest unadjusted p is 0.055", "+5.3 points", "4 to 869 seeds (median 18)"):
+    for s in ("the smallest unadjusted p is 0.055", "+5.3 points", "4 to 869 seeds (median 17)",
+              "(the eight learners whose two best settings differ"):
         assert s in text, s
 
 
@@ -306,8 +354,12 @@ def test_every_number_in_the_prose_is_checked():
     prose = "\n".join(line for line in SECTION.splitlines() if not line.startswith("|"))
     prose = re.sub(r"`[^`]*`", "", prose)
     found = set(re.findall(r"[−+-]?\d+\.\d+", prose.replace("−", "-")))
-    allowed = {"93.9", "-1.6", "+0.4", "-3.2", "+1.8", "-3.0", "-0.2", "0.24", "-3.8", "-7.6",
-               "86.2", "2.1", "1.9", "1.3", "-10.1", "-10.7", "-15.4", "0.4", "0.84", "0.6",
+    allowed = {"93.8", "-1.5", "+0.5", "-3.1", "+1.9", "-2.9", "0.29", "-3.6", "-7.6",
+               "86.2", "2.1", "1.9", "1.3", "-10.1", "-10.7", "-15.5", "0.4", "0.84", "0.6",
+               # the replaced table against the rerun
+               # (test_rerun_against_the_replaced_table_and_the_pair_run)
+               "88.1", "88.2", "93.9", "-0.7", "-2.8", "+1.4", "+0.1", "-1.7", "0.24", "0.23",
+               "+1.8", "0.10", "0.08", "0.03",
                "0.38", "-1.69", "79.9", "77.4", "0.3", "0.02", "0.05", "0.72", "1.5", "2.5",
                # Speed (test_bench_ratios) and the tuning's resolution (test_tuning_resolution)
                "12.0", "4.6", "0.74", "1.75", "0.97", "0.94", "1.00", "1.08", "0.99", "1.11",
@@ -547,8 +599,8 @@ SHARED_DIR = SRC / "ensemble_shared"
 
 def _shared_rerun():
     """(per-seed metrics of the table's run, of the shared-heads rerun, their metas)."""
-    pa, pb = (dict(np.load(d / "per_seed.npz")) for d in (SRC, SHARED_DIR))
-    ma, mb = (json.loads((d / "meta.json").read_text()) for d in (SRC, SHARED_DIR))
+    pa, pb = (dict(np.load(d / "per_seed.npz")) for d in (OLD, SHARED_DIR))
+    ma, mb = (json.loads((d / "meta.json").read_text()) for d in (OLD, SHARED_DIR))
     return (grasp_baselines.per_seed_metrics(pa, ma), grasp_baselines.per_seed_metrics(pb, mb),
             ma, mb)
 
@@ -568,7 +620,7 @@ def test_ensemble_shared_rerun_table_and_setup(tmp_path):
     a, b = np.load(tmp_path / "per_seed.npz"), np.load(SHARED_DIR / "per_seed.npz")
     for k in b:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
-    main = json.loads((SRC / "meta.json").read_text())
+    main = json.loads((OLD / "meta.json").read_text())
     meta = json.loads((SHARED_DIR / "meta.json").read_text())
     assert meta["learners"] == ["sern", "ensemble_ts"]
     for k in grasp_baselines._MERGE_SAME:
@@ -657,14 +709,14 @@ def test_ensemble_shared_against_whole_networks_and_sern_against_itself():
         ("pseudo_regret_per_round", 1, 3))]
     assert (f"{sern[0]} (exploration), {sern[1]} (final) and {sern[2]} (pseudo-regret)"
             in text)
-    tuned = json.loads((SRC / "tuned.json").read_text())
-    lv_net = np.load(SRC / "tune_per_seed.npz")["lowvar_eval"]
+    tuned = json.loads((OLD / "tuned.json").read_text())
+    lv_net = np.load(OLD / "tune_per_seed.npz")["lowvar_eval"]
     lv_sh = np.load(SHARED_DIR / "tune_per_seed.npz")["lowvar_eval"]
     net5 = lv_net[2, 1:, :, tuned["learners"].index("ensemble_ts")].mean(axis=(0, 1))
     sh5 = lv_sh[1, 1:, :, 1].mean(axis=(0, 1))
     assert f"at M = 5 on the tuning objects {fmt(sh5, net5, 100, 1)} points" in text
     # SERN's own run-to-run differences, from the two checkpoints
-    ca = io.load_npz(SRC / "run" / "checkpoint.npz")
+    ca = io.load_npz(OLD / "run" / "checkpoint.npz")
     cb = io.load_npz(SHARED_DIR / "run" / "checkpoint.npz")
     act_a, act_b = ca["explore_action"][1:, :, 0], cb["explore_action"][1:, :, 0]  # rounds 1..5
     assert (act_a[0] == act_b[0]).all()  # round 1 (θ0's choices) identical
@@ -760,3 +812,65 @@ def test_bench_ratios_shared_default():
     net5 = ratios("ensemble_ts:ensemble_heads=networks:ensemble_size=5", 1)
     assert (f"about {np.median(ratios('ensemble_ts:ensemble_size=5', 1)):.1f}× SERN's round "
             f"instead of {np.median(net5):.1f}×") in text
+
+
+def test_rerun_against_the_replaced_table_and_the_pair_run():
+    """'How this table differs from the one it replaces' and the pair run's paragraph:
+    ensemble_ts's row then and now, the other learners' changed choices and moved means
+    (from the two checkpoints and summaries), the same resolved sets, and SERN's changed
+    choices against the pair run (ensemble_shared/)."""
+    from sern_jax import io
+
+    text = " ".join(SECTION.replace("−", "-").split())
+    new, old = (json.loads((d / "summary.json").read_text()) for d in (SRC, OLD))
+    meta = json.loads((SRC / "meta.json").read_text())
+    names = meta["learners"]
+    assert names == json.loads((OLD / "meta.json").read_text())["learners"]
+
+    def cell(s, metric, n="ensemble_ts"):
+        return s["metrics"][metric]["mean"][n]
+
+    def ci(s, metric):
+        d = {x["name"].split(" - ")[0]: x for x in s["metrics"][metric]["paired"]}
+        d = d["ensemble_ts"]
+        return f"{100 * d['mean']:+.1f} [{100 * d['lower']:+.1f}, {100 * d['upper']:+.1f}]"
+
+    want = (f"exploration success {100 * cell(new, 'explore_success'):.1f} % "
+            f"({100 * cell(old, 'explore_success'):.1f} with whole networks), final success "
+            f"{100 * cell(new, 'final_lowvar'):.1f} % ({100 * cell(old, 'final_lowvar'):.1f}), "
+            f"{ci(new, 'final_lowvar')} from SERN ({ci(old, 'final_lowvar')} then), "
+            f"pseudo-regret {cell(new, 'pseudo_regret_per_round'):.2f} "
+            f"({cell(old, 'pseudo_regret_per_round'):.2f})")
+    assert want in text, want
+    ca, cb = (io.load_npz(d / "run" / "checkpoint.npz") for d in (SRC, OLD))
+    changed = np.asarray(ca["explore_action"])[1:] != np.asarray(cb["explore_action"])[1:]
+    q = names.index("sern")
+    sern = changed[:, :, q]  # [R, O, S, E]
+    assert not sern[0].any() and not sern[1].any() and sern[2:].any()  # from round 3 on
+    assert {meta["objects"][o] for o in np.nonzero(sern)[1]} == {"pipe_tee_steel"}
+    counts = [int(changed[:, :, i].sum()) for i in range(len(names)) if names[i] not in (
+        "sern", "ensemble_ts")]
+    assert (f"differ in {int(sern.sum())} of {sern.size:,} from round 3 on (all on "
+            f"pipe_tee_steel), the others' in {min(counts)} to {max(counts)}") in text
+    moved = {}
+    for metric, scale in (("final_lowvar", 100), ("explore_success", 100),
+                          ("pseudo_regret_per_round", 1)):
+        moved[metric] = max(scale * abs(cell(new, metric, n) - cell(old, metric, n))
+                            for n in names if n != "ensemble_ts")
+    assert (f"moved by at most {moved['final_lowvar']:.2f} points (final success), "
+            f"{moved['explore_success']:.2f} points (exploration) and "
+            f"{moved['pseudo_regret_per_round']:.2f} expected successes") in text
+    assert (f"SERN's final success reads {100 * cell(new, 'final_lowvar', 'sern'):.1f} % "
+            f"instead of {100 * cell(old, 'final_lowvar', 'sern'):.1f} %") in text
+    for metric in new["metrics"]:
+        resolved = [{x["name"] for x in s["metrics"][metric]["paired"] if x["resolved"]}
+                    for s in (new, old)]
+        assert resolved[0] == resolved[1], metric
+    # SERN against the pair run's SERN
+    cs = io.load_npz(SRC / "ensemble_shared" / "run" / "checkpoint.npz")
+    pair = np.asarray(ca["explore_action"])[1:, :, q] != np.asarray(cs["explore_action"])[1:, :, 0]
+    assert not pair[0].any()
+    assert {meta["objects"][o] for o in np.nonzero(pair)[1]} == {"triangular_prism",
+                                                                 "pipe_tee_steel"}
+    assert (f"too, in {int(pair.sum())} of {pair.size:,} exploration choices (round 1 the same; "
+            "triangular_prism and pipe_tee_steel)") in text

@@ -87,6 +87,11 @@ def test_setup_the_section_states():
     assert (round(old["wall_s"]), round(old["timings"]["oracle"])) == (495, 138)
     assert "earlier table's took 495 s (the oracle 138 s)" in text
     assert "495 s on the same kind of machine" in text
+    # made before the runner fingerprinted ensemble_ts's layout (1740003): the rerun carries
+    # the replaced whole-network table's fingerprint (docs/LEARNING.md says so)
+    assert meta["fingerprint"] == json.loads((OLD / "meta.json").read_text())["fingerprint"]
+    assert "fingerprint is the same as that of" in " ".join(
+        (ROOT / "docs" / "LEARNING.md").read_text().split())
     for name in meta["objects"]:
         assert name in SECTION
 

@@ -554,7 +554,7 @@ def test_transfer_prose_quoted(transfer):
     c = transfer["cells"]
     assert transfer["objects"] == ["triangular_prism", "tless_part_a", "detergent_bottle"]
     assert transfer["seeds"] == 5 and transfer["cells_missing"] == []
-    assert {k: v["rounds_done"] for k, v in c.items() if v["rounds_done"] != 20} == {"mjx": 13}
+    assert all(v["rounds_done"] == 20 for v in c.values())  # mjx resumed: all 20 rounds
     assert _pct(c["A"]["theta0_B"]["mean"]) == 69.4
     assert [_pct(c[k]["theta0_B"]["mean"]) for k in ("friction_low", "heavy", "grip_6N")] == [
         46.0, 43.3, 24.0]
@@ -586,7 +586,7 @@ def test_transfer_prose_quoted(transfer):
     low = min(comps, key=lambda x: x["pvalue_holm"])
     assert low["name"] == "heavy: sern - egreedy, round 5"
     assert (round(low["pvalue_holm"], 2), _pct(low["mean"]), _pct(low["half"])) == (0.68, -5.2, 4.1)
-    # D435 depth noise and MJX physics (stopped after round 13 of 20)
+    # D435 depth noise and MJX physics (rounds 0-13 from the first call, 14-20 resumed)
     d4, mj = c["d435"], c["mjx"]
     assert (_pct(d4["theta0_B"]["mean"]), _pct(d4["gap"]["mean"]), _pct(d4["gap"]["half"])) == (
         66.7, 2.7, 6.2)
@@ -595,14 +595,11 @@ def test_transfer_prose_quoted(transfer):
         (1.9, 4.5), (1.5, 3.9), (2.9, 7.0)]
     assert (_pct(mj["theta0_B"]["mean"]), _pct(mj["gap"]["mean"]), _pct(mj["gap"]["half"])) == (
         65.2, 4.2, 2.2)
-    assert mj["gap"]["lower"] > 0 and mj["rounds_reported"] == [1, 5, 13]
-
-    def minus_a13(p, r):
-        m = mj["policies"][p]["minus_A"][r]
-        return (_pct(m["mean"]), _pct(m["half"]))
-
-    assert [minus_a13(p, "13") for p in ("sern", "egreedy", "greedy")] == [
-        (-0.8, 1.1), (-1.0, 1.6), (-0.4, 5.2)]
+    assert mj["gap"]["lower"] > 0 and mj["rounds_reported"] == [1, 5, 20]
+    assert [minus_a("mjx", p) for p in ("sern", "egreedy", "greedy")] == [
+        (0.6, 3.2), (-2.3, 4.0), (0.4, 3.2)]
+    assert [_pct(mj["policies"][p]["gain"]["20"]["mean"]) for p in ("sern", "egreedy",
+                                                                    "greedy")] == [30.6, 28.3, 29.6]
     g5 = [mj["policies"][p]["gain"]["5"]["mean"] for p in ("sern", "egreedy", "greedy")]
     assert (_pct(min(g5)), _pct(max(g5))) == (24.2, 25.4)
     # the mjx cell's progress log: round 0 done ~183 s after the script started, round 13 at
@@ -613,7 +610,7 @@ def test_transfer_prose_quoted(transfer):
     assert (first[1], first[14], max(first)) == (183, 537, 14)
     assert round((first[14] - first[1]) / 13) == 27
     rec_mjx = [mj["policies"][p]["recovered"][r] for p in ("sern", "egreedy", "greedy")
-               for r in ("5", "13")]
+               for r in ("5", "20")]
     assert (round(100 * min(rec_mjx)), round(100 * max(rec_mjx))) == (580, 735)
     ends = {r: max(max(abs(x["lower"]), abs(x["upper"])) for x in comps
                    if x["name"].endswith(f"round {r}")) for r in (5, 20)}
@@ -643,7 +640,7 @@ def test_transfer_prose_quoted(transfer):
         return _pm(m["mean"], m["half"], sign=m["mean"] < 0)
 
     # "not resolved from" (not "level with"): every such interval contains 0
-    for cell, r in (("friction_low", "20"), ("heavy", "20"), ("d435", "20"), ("mjx", "13")):
+    for cell, r in (("friction_low", "20"), ("heavy", "20"), ("d435", "20"), ("mjx", "20")):
         for p in ("sern", "egreedy", "greedy"):
             m = c[cell]["policies"][p]["minus_A"][r]
             assert m["lower"] < 0 < m["upper"], (cell, p)
@@ -699,9 +696,12 @@ def test_transfer_prose_quoted(transfer):
     assert f"every policy gains {_pct(min(g5))}–{_pct(max(g5))} points by round 5" in sec
     assert (f"the recovered shares of {round(100 * min(rec_mjx))}–{round(100 * max(rec_mjx))} %"
             ) in sec
-    assert ("by round 13 none is resolved from the same policy learning natively in A (SERN "
-            f"{ma('mjx', 'sern', '13')}, ε-greedy {ma('mjx', 'egreedy', '13')}, greedy "
-            f"{ma('mjx', 'greedy', '13')} points)") in sec
+    mjm = {p: _pm(mj["policies"][p]["minus_A"]["20"]["mean"],
+                  mj["policies"][p]["minus_A"]["20"]["half"]) for p in ("sern", "egreedy",
+                                                                        "greedy")}
+    assert ("by round 20 none is resolved from the same policy learning natively in A (SERN "
+            f"{mjm['sern']}, ε-greedy {mjm['egreedy']}, greedy {mjm['greedy']} points; rounds "
+            "14–20 come from a resumed run, below)") in sec
     assert (f"{len(comps)} comparisons (7 worlds × 2 peers × 2 rounds), none resolved after Holm "
             f"(smallest adjusted p {low['pvalue_holm']:.2f}: `heavy`, SERN − ε-greedy at round "
             f"5, {_pm(low['mean'], low['half'])})") in sec
@@ -732,6 +732,32 @@ def test_transfer_prose_quoted(transfer):
     assert meta == {"A": 3, "friction_low": 3, "heavy": 3, "grip_6N": 3, "theta0_6N": 3,
                     "d435": 16, "mjx": 16}
     assert "code 3510cbc" in jobs and "those two on code 3510cbc" in sec
+    # the resumed mjx cell: the fourth call's job line, its progress log and the prose
+    resumed = jobs.split("# 2026-11-24 13:10-13:17 UTC")[1]
+    assert "RESUME=experiments/results/transfer/resume_mjx" in resumed
+    assert "transfer-mjx: exit 0 after 404 s on cores 0-15" in resumed
+    rprog = [ln.split() for ln in (RESULTS / "transfer" / "mjx_resume_progress.txt")
+             .read_text().splitlines() if not ln.startswith("#")]
+    rfirst = {int(r[3]): int(r[0]) for r in reversed(rprog)}
+    assert (min(rfirst), max(rfirst), rfirst[15]) == (14, 20, 256)
+    assert round((rfirst[20] - rfirst[15]) / 5) == 27
+    assert ("exit 0 after 404 s; the restart (MJX compiles, the replay of rounds 1–13's updates) "
+            f"and round 14 were done {rfirst[15]} s after the script started, rounds 15–19 took "
+            f"{round((rfirst[20] - rfirst[15]) / 5)} s each") in sec
+    from sern_jax.grasp import artifacts, objects as objs, runner as rn
+    shipped = artifacts.load_theta0()
+    cfg = rn.OnlineConfig(num_seeds=5, rounds=20, backend="mjx")
+    fp = rn.run_fingerprint(cfg, [objs.make_object(n) for n in transfer["objects"]], shipped)
+    ck = np.load(RESULTS / "transfer" / "resume_mjx" / "transfer" / "runs" / "mjx" /
+                 "checkpoint.npz")
+    assert str(ck["fingerprint"]) == fp == "79c48fa542de7f59" and int(ck["next_round"]) == 14
+    assert f"the same run fingerprint, {fp}, checked" in sec
+    # rounds 0-13 of the resumed file are the checkpoint's (the first call's) bit for bit
+    full = json.loads((RESULTS / "transfer" / "mjx.json").read_text())
+    for f in ("lowvar_eval", "paper_eval", "explore_success"):
+        x = np.asarray(full[f], float)
+        y = np.where(np.isnan(ck[f]), -1.0, np.asarray(ck[f], float))  # files store NaN as -1
+        assert x.shape[0] == 21 and np.array_equal(x[:14], y[:14], equal_nan=True), f
     # the grid's world-A cell holds transfer A's 3 objects x 5 seeds: equal at round 0 and
     # for SERN in rounds 1-4, not for the peers (learning curves not reproduced exactly)
     ta = json.loads((RESULTS / "transfer" / "A.json").read_text())
@@ -817,9 +843,9 @@ def test_mjx_repeat_is_not_bit_identical():
     bit-reproducible run to run. Control: the committed cell equals itself."""
     a = json.loads((RESULTS / "transfer" / "mjx.json").read_text())
     b = json.loads((RESULTS / "transfer" / "mjx_repeat" / "mjx.json").read_text())
-    assert a["rounds_done"] == b["rounds_done"] == 13
+    assert (a["rounds_done"], b["rounds_done"]) == (20, 13)  # the committed cell was resumed
     assert a["command"] == b["command"] and a["world"] == b["world"]
-    x, y = np.asarray(a["lowvar_eval"], float), np.asarray(b["lowvar_eval"], float)
+    x, y = np.asarray(a["lowvar_eval"], float)[:14], np.asarray(b["lowvar_eval"], float)
     differ = [int((x[r] != y[r]).sum()) for r in range(14)]
     assert (differ[0], x[0].size) == (15, 45)
     assert (min(differ[1:]), max(differ[1:])) == (13, 21)

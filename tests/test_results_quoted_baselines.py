@@ -327,6 +327,39 @@ def test_paper_setting_with_all_learners_on_idle_cores():
         assert q in text, q
 
 
+def test_paper_setting_with_all_learners_on_idle_cores_under_todays_defaults():
+    """The lead's idle run of the same command after shared heads became ensemble_ts's
+    default: within the 10 minutes; the config differs from the whole-network runs only in
+    the ensemble's layout (control: the same seeds, rounds, learners and tuned values)."""
+    old = json.loads((SRC / "paper_all_learners_2core_idle.json").read_text())
+    d = json.loads((SRC / "paper_all_learners_2core_idle_shared.json").read_text())
+    assert d["command"].split("sern grasp learn")[1].split("--out")[0] == \
+        old["command"].split("sern grasp learn")[1].split("--out")[0]
+    assert {k: v for k, v in d["config"].items() if k != "hyper"} == \
+        {k: v for k, v in old["config"].items() if k != "hyper"}
+    assert dict(d["config"]["hyper"]) == {k: v for k, v in dict(old["config"]["hyper"]).items()
+                                          if k != "ensemble_heads"}
+    assert dict(old["config"]["hyper"]).get("ensemble_heads", "networks") == "networks"
+    assert d["machine_at_end"]["cores_usable"] == 2 and d["seconds"] < 600
+    assert d["trial_counts"]["requested"] == old["trial_counts"]["requested"]
+    m, s = d["elapsed"].split(":")
+    before, after = (float(u.split("load average:")[1].split(",")[0])
+                     for u in d["uptime_before_and_after"])
+    assert before < 2 and after < 2
+    text = " ".join(SECTION.split())
+    for q in (f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
+              f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)",
+              f"{round(d['user_cpu_s'])} s of user and {round(d['system_cpu_s'])} s",
+              f"peak RSS {d['max_rss_kb'] / 1e6:.1f} GB",
+              f"load average {before:.1f} at the start and {after:.1f} at the end",
+              f"{d['trial_counts']['simulated']:,} trials simulated for "
+              f"{d['trial_counts']['requested']:,} learner grasps",
+              f"code of commit {d['git_commit'][:7]}",
+              f"about as long as with whole networks"):
+        assert q in text, q
+    assert abs(d["seconds"] - old["seconds"]) < 0.1 * old["seconds"]
+
+
 def test_tuning_resolution():
     """The Tuning paragraph's 'how weakly': nothing resolved, p 0.055 (+5.3 points) for the
     UCB width, 4 to 869 seeds (median 18) for 80 % power."""
@@ -379,7 +412,10 @@ def test_every_number_in_the_prose_is_checked():
                "-2.0", "-2.3", "0.00012", "0.0002", "0.017", "92.2", "93.1",
                "0.67", "0.79", "0.91", "0.96", "1.01", "1.06", "1.16", "1.19", "1.23", "1.24",
                "1.29", "1.3", "1.36", "1.39", "1.41", "1.60", "1.8", "11.6", "2.06", "2.12",
-               "2.23", "2.66", "3.40", "3.6", "3.61", "3.86", "3.87"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
+               "2.23", "2.66", "3.40", "3.6", "3.61", "3.86", "3.87",
+               # the idle bench (test_bench_ratios_idle)
+               "1.6", "3.8",  # the idle run under today's defaults
+               "1.7", "1.07", "0.89", "1.04", "0.80", "1.20", "1.30", "3.29", "1.27", "3.62"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
     assert found <= allowed, sorted(found - allowed)
 
 
@@ -817,6 +853,39 @@ def test_bench_ratios_shared_default():
     net5 = ratios("ensemble_ts:ensemble_heads=networks:ensemble_size=5", 1)
     assert (f"about {np.median(ratios('ensemble_ts:ensemble_size=5', 1)):.1f}× SERN's round "
             f"instead of {np.median(net5):.1f}×") in text
+
+
+def test_bench_ratios_idle():
+    """The lead's idle re-measurement (bench_2core_idle.json): wall-clock and CPU ratios of a
+    round's learner work to the same repeat's SERN, median [min, max] over the repeats; the
+    default ensemble (shared heads, M = 5) and Neural-Linear within 1.5x on every repeat,
+    whole networks over it (control)."""
+    b = json.loads((SRC / "bench_2core_idle.json").read_text())
+    lr = b["learners"]
+    text = " ".join(SECTION.split())
+    assert b["machine"]["cores_usable"] == 2 and b["repeats"] == 3 and b["copies"] == [6, 5]
+    learners = b["command"].split("--learners ")[1].split(" ")[0]
+    assert "--copies 6,5 --repeats 3 --learners " + learners in text
+    start, end = b["load_average_start"][0], b["load_average_end"][0]
+    assert start < 2 and end < 2
+    assert f"load average {start:.1f} at the start and {end:.1f} at the end" in text
+    for label, layout in (("ensemble_ts:ensemble_size=5", "shared"),
+                          ("ensemble_ts:ensemble_size=5:ensemble_heads=networks", "networks")):
+        c = lr[label]["config"]
+        assert (c["ensemble_heads"], c["ensemble_size"]) == (layout, 5), label
+
+    def ratios(label, col):  # col 0: wall, 1: process CPU
+        t, ref = np.asarray(lr[label]["times"]), np.asarray(lr["sern"]["times"])
+        return t[:, [0, 2, 3], col].sum(1) / ref[:, [0, 2, 3], col].sum(1)
+
+    labels = ("neural_lints", "neural_linucb", "ensemble_ts:ensemble_size=5",
+              "ensemble_ts:ensemble_size=5:ensemble_heads=networks")
+    for label in labels:
+        r = ratios(label, 0)
+        assert f"{np.median(r):.2f}× [{r.min():.2f}, {r.max():.2f}]" in text, label
+        assert (r.max() <= 1.5) == ("networks" not in label), label
+    cpu = ", ".join(f"{np.median(ratios(x, 1)):.2f}×" for x in labels[:3])
+    assert f"(medians {cpu} and {np.median(ratios(labels[3], 1)):.2f}×)" in text
 
 
 def test_rerun_against_the_replaced_table_and_the_pair_run():

@@ -37,3 +37,17 @@ def test_thompson_idle_figures_quoted():
     assert quoted in _readme(), quoted
     assert rs < 1e6 and rs / npy < 5  # "the goal is not met on idle cores either"
     assert d["machine"]["load_average_1m"] < 2
+
+
+def test_thompson_idle_rerun_quoted():
+    """The second idle run (unchanged Thompson code): the README's figures and the same
+    mean regret as the first idle file (the same draws)."""
+    first = json.loads((RESULTS / "bench" / "bandit_thompson_2core_idle.json").read_text())
+    d = json.loads((RESULTS / "bench" / "bandit_thompson_2core_idle_16e89b0.json").read_text())
+    assert d["workload"] == first["workload"]
+    assert (d["regret_agreement"]["run_seeds_mean_regret_T"]
+            == first["regret_agreement"]["run_seeds_mean_regret_T"])
+    rs, npy = d["run_seeds_seed_rounds_per_s"], d["numpy_seed_rounds_per_s"]
+    quoted = f"{rs / 1e6:.2f}M, {rs / npy:.1f}× NumPy's {npy / 1e6:.2f}M"
+    assert quoted in " ".join(_readme().split()), quoted
+    assert rs < 1e6 and rs / npy < 5 and d["machine"]["load_average_1m"] < 2

@@ -229,15 +229,8 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
         "largest_run_task_seconds_all": t8_all,
         "largest_run_task_seconds_sample": t8_sample,
         "sample_task_slowdown_largest_vs_one": t8_sample / t1_sample,
-        "command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
-                             *(argv if argv is not None else sys.argv[1:])]),
-        "machine": io.machine(),
         "load_average_1m_5m_15m_before_and_after": [list(load_start), list(load_end)],
-        "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
-        "versions": io.run_metadata()["versions"],
-        "ray_version": __import__("ray").__version__,
-        "warmup_seconds": warm["seconds"],
-        "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs],
+        **_provenance(argv, warm, runs),
         "oversubscribed": oversubscribed,
         "shards_identical_across_runs": not mismatches,
         "shard_sha256": largest["shard_sha256"],
@@ -252,6 +245,21 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
         io.save_json(args.json_out, doc)
         print(f"wrote {args.json_out}")
     return 0 if not mismatches else 1
+
+
+def _provenance(argv, warm: dict, runs: list[dict]) -> dict:
+    """What every scaling record states about how it was made: the command line, machine,
+    environment, versions, the warm-up's seconds and the runs (without their shard hashes)."""
+    from sern_jax import io
+
+    return {"command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
+                                 *(argv if argv is not None else sys.argv[1:])]),
+            "machine": io.machine(),
+            "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
+            "versions": io.run_metadata()["versions"],
+            "ray_version": __import__("ray").__version__,
+            "warmup_seconds": warm["seconds"],
+            "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs]}
 
 
 def _uptime() -> str:
@@ -361,14 +369,7 @@ def _d0_sampled(args, argv, cache: str, started: float) -> int:
             "objects * mean task seconds of the one-worker sample, 95 % Student-t interval "
             "(n - 1 dof); task time only, so E errs low"),
         **est,
-        "command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
-                             *(argv if argv is not None else sys.argv[1:])]),
-        "machine": io.machine(),
-        "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
-        "versions": io.run_metadata()["versions"],
-        "ray_version": __import__("ray").__version__,
-        "warmup_seconds": warm["seconds"],
-        "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs],
+        **_provenance(argv, warm, runs),
         "shards_identical_across_runs": not mismatches,
         "shard_sha256": largest["shard_sha256"],
         "total_seconds": time.perf_counter() - started,
@@ -466,14 +467,7 @@ def main(argv=None) -> int:
         "efficiency_definition": ("T(1)/T(N), N workers doing N times the work of one "
                                   "(equal per-worker work)" if args.mode == "weak"
                                   else "T(1)/(N T(N)), the same objects for every N"),
-        "command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
-                             *(argv if argv is not None else sys.argv[1:])]),
-        "machine": io.machine(),
-        "env": {k: os.environ.get(k) for k in ("JAX_PLATFORMS", "XLA_FLAGS")},
-        "versions": io.run_metadata()["versions"],
-        "ray_version": __import__("ray").__version__,
-        "warmup_seconds": warm["seconds"],
-        "runs": [{k: v for k, v in r.items() if k != "shard_sha256"} for r in runs],
+        **_provenance(argv, warm, runs),
         "shards_identical_across_worker_counts": not mismatches,
         "shard_sha256": runs[-1]["shard_sha256"],
         "total_seconds": time.perf_counter() - started,

@@ -51,3 +51,22 @@ def test_thompson_idle_rerun_quoted():
     quoted = f"{rs / 1e6:.2f}M, {rs / npy:.1f}× NumPy's {npy / 1e6:.2f}M"
     assert quoted in " ".join(_readme().split()), quoted
     assert rs < 1e6 and rs / npy < 5 and d["machine"]["load_average_1m"] < 2
+
+
+def test_reproduce_idle_retiming_quoted():
+    """The re-timing at a1753bd: under 5 minutes, and the README's figures and the learning
+    slowdown against the earlier idle file."""
+    old = json.loads((RESULTS / "reproduce" / "reproduce_2core_idle.json").read_text())
+    d = json.loads((RESULTS / "reproduce" / "reproduce_2core_idle_a1753bd.json").read_text())
+    assert d["exit_status"] == 0 and d["summary_checks"] == "28/28 verdicts as expected"
+    assert d["metadata"]["git_commit"].startswith(d["commit"])
+    m, s = d["wall_clock"].split(":")
+    wall = 60 * int(m) + float(s)
+    assert wall < 300
+    t = d["timings"]
+    quoted = (f"it took {int(wall // 60)} min {round(wall % 60)} s (checks {t['check_s']:.0f} s, "
+              f"regret {t['regret_s']:.0f} s, grasp learning {t['learn_s']:.0f} s)")
+    readme = _readme()
+    assert quoted in readme, quoted
+    slower = t["learn_s"] - old["timings"]["learn_s"]
+    assert f"grasp learning is {slower:.0f} s slower" in readme

@@ -210,8 +210,7 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
             r["efficiency"] = t1_est / (r["workers"] * r["seconds"])
         r["objects_per_second"] = r["objects"] / r["seconds"]
     # the same object gives the same shard bytes whatever the run
-    mismatches = sorted({n for a in runs for b in runs for n, h in a["shard_sha256"].items()
-                         if n in b["shard_sha256"] and b["shard_sha256"][n] != h})
+    mismatches = _shard_mismatches(runs)
     doc = {
         "what": ("the default D0's size (objects x poses, one object per shard, seed 0) on "
                  "local Rays of N pinned one-core workers; the N >= 2 runs cover every "
@@ -245,6 +244,13 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
         io.save_json(args.json_out, doc)
         print(f"wrote {args.json_out}")
     return 0 if not mismatches else 1
+
+
+def _shard_mismatches(runs: list[dict]) -> list[str]:
+    """Shard names whose bytes (SHA-256) differ between any two runs: the same object must
+    give the same shard whatever the run or worker count."""
+    return sorted({n for a in runs for b in runs for n, h in a["shard_sha256"].items()
+                   if n in b["shard_sha256"] and b["shard_sha256"][n] != h})
 
 
 def _provenance(argv, warm: dict, runs: list[dict]) -> dict:
@@ -352,8 +358,7 @@ def _d0_sampled(args, argv, cache: str, started: float) -> int:
                                           / (r["workers"] * r["seconds"]))
     for r in runs:
         r["objects_per_second"] = r["objects"] / r["seconds"]
-    mismatches = sorted({n for a in runs for b in runs for n, h in a["shard_sha256"].items()
-                         if n in b["shard_sha256"] and b["shard_sha256"][n] != h})
+    mismatches = _shard_mismatches(runs)
     doc = {
         "what": ("the default D0's size (objects x poses, one object per shard, seed 0) on "
                  "local Rays of pinned one-core workers, one run after the other: one worker "
@@ -454,12 +459,7 @@ def main(argv=None) -> int:
                            else t1 / (r["workers"] * r["seconds"]))
         r["objects_per_second"] = r["objects"] / r["seconds"]
     # the same object gives the same shard bytes whatever the worker count
-    mismatches = []
-    for a in runs:
-        for b in runs:
-            for name, h in a["shard_sha256"].items():
-                if name in b["shard_sha256"] and b["shard_sha256"][name] != h:
-                    mismatches.append(name)
+    mismatches = _shard_mismatches(runs)
     doc = {
         "what": "D0 generation on a local Ray: seconds for N workers (objects_per_shard=1, "
                 "seed 0, the default D0's objects 0..n-1)",

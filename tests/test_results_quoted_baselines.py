@@ -364,7 +364,7 @@ def test_paper_setting_with_all_learners_on_idle_cores_under_todays_defaults():
               f"{d['trial_counts']['simulated']:,} trials simulated for "
               f"{d['trial_counts']['requested']:,} learner grasps",
               f"code of commit {d['git_commit'][:7]}",
-              f"about as long as with whole networks"):
+              "about as long as with whole networks"):
         assert q in text, q
     assert abs(d["seconds"] - old["seconds"]) < 0.1 * old["seconds"]
 
@@ -424,7 +424,7 @@ def test_every_number_in_the_prose_is_checked():
                "2.23", "2.66", "3.40", "3.6", "3.61", "3.86", "3.87",
                # the idle bench (test_bench_ratios_idle)
                "1.6", "3.8",  # the idle run under today's defaults
-               "2.8", "1.7",  # the paper's-claim paragraph (test_quoted_numbers)
+               "2.8",  # the paper's-claim paragraph (test_quoted_numbers; its 1.7 is below)
                "1.7", "1.07", "0.89", "1.04", "0.80", "1.20", "1.30", "3.29", "1.27", "3.62"}  # the idle run (test_paper_setting_with_all_learners_on_idle_cores)  # 1.5: the issue's goal (1.5x)
     assert found <= allowed, sorted(found - allowed)
 
@@ -820,6 +820,14 @@ def test_run_refuses_a_run_made_under_the_former_ensemble_default(tmp_path, caps
         grasp_baselines.main(argv)
 
 
+def _round_ratios(lr: dict, label: str, col: int) -> np.ndarray:
+    """Per repeat, a learner's round (act, update, greedy evaluation; without π) over the same
+    repeat's SERN round, from a bench JSON's ``times`` [repeat, part, (wall, CPU)]; col 0 wall
+    seconds, 1 process CPU seconds."""
+    t, ref = np.asarray(lr[label]["times"]), np.asarray(lr["sern"]["times"])
+    return t[:, [0, 2, 3], col].sum(1) / ref[:, [0, 2, 3], col].sum(1)
+
+
 def test_bench_ratios_shared_default():
     """The Speed paragraph's re-measurement with shared heads the default
     (bench_2core_shared_default.json): CPU ratios per repeat against the same repeat's
@@ -841,9 +849,8 @@ def test_bench_ratios_shared_default():
         c = lr[label]["config"]
         assert (c["ensemble_heads"], c["ensemble_size"]) == (layout, m), label
 
-    def ratios(label, col):  # col 1: process CPU, 0: wall
-        t, ref = np.asarray(lr[label]["times"]), np.asarray(lr["sern"]["times"])
-        return t[:, [0, 2, 3], col].sum(1) / ref[:, [0, 2, 3], col].sum(1)
+    def ratios(label, col):
+        return _round_ratios(lr, label, col)
 
     for label in ("greedy", "neural_lints", "neural_linucb", *heads):
         r = ratios(label, 1)
@@ -884,9 +891,8 @@ def test_bench_ratios_idle():
         c = lr[label]["config"]
         assert (c["ensemble_heads"], c["ensemble_size"]) == (layout, 5), label
 
-    def ratios(label, col):  # col 0: wall, 1: process CPU
-        t, ref = np.asarray(lr[label]["times"]), np.asarray(lr["sern"]["times"])
-        return t[:, [0, 2, 3], col].sum(1) / ref[:, [0, 2, 3], col].sum(1)
+    def ratios(label, col):
+        return _round_ratios(lr, label, col)
 
     labels = ("neural_lints", "neural_linucb", "ensemble_ts:ensemble_size=5",
               "ensemble_ts:ensemble_size=5:ensemble_heads=networks")

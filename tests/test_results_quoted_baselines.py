@@ -79,6 +79,11 @@ def test_setup_the_section_states():
     log = (SRC / "device.log").read_text()
     process = int(re.search(r"run rc 0 in (\d+) s", log).group(1))
     assert "NVIDIA H100" in log and "--seeds 20 --regret-trials 2 --regret-grasps 1" in log
+    # meta.json's note on the call names where the process's seconds come from: device.log's
+    # rc line, not calls[0].wall_s (the comparison's own seconds, 499)
+    result = meta["device_calls"]["call"]["result"]
+    assert f"{process} s for the process (device.log: 'run rc 0 in {process} s'" in result
+    assert f"calls[0] wall_s is the comparison's {round(call['wall_s'])} s" in result
     text = " ".join(SECTION.split())
     assert (f"the comparison itself took {round(call['wall_s'])} s" in text
             and f"The comparison took {round(call['wall_s'])} s on the H100 machine (the oracle "
@@ -327,12 +332,12 @@ def test_paper_setting_with_all_learners_on_idle_cores():
     before = float(d["uptime_before_and_after"][0].split("load average:")[1].split(",")[0])
     assert before < 2
     text = " ".join(SECTION.split())
-    for q in (f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
-              f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)",
+    for q in ((f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
+               f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)"),
               f"{round(d['user_cpu_s'])} s of user and {round(d['system_cpu_s'])} s",
               f"peak RSS {d['max_rss_kb'] / 1e6:.1f} GB",
-              f"load average {before:.1f} at the start and {d['machine_at_end']['load_average_1m']:.1f} "
-              f"at the end"):
+              (f"load average {before:.1f} at the start and "
+               f"{d['machine_at_end']['load_average_1m']:.1f} at the end")):
         assert q in text, q
 
 
@@ -356,13 +361,13 @@ def test_paper_setting_with_all_learners_on_idle_cores_under_todays_defaults():
                      for u in d["uptime_before_and_after"])
     assert before < 2 and after < 2
     text = " ".join(SECTION.split())
-    for q in (f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
-              f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)",
+    for q in ((f"took {round(d['seconds'])} s ({int(d['seconds'] // 60)} min "
+               f"{round(d['seconds'] % 60)} s; {m} min {round(float(s))} s for the whole process)"),
               f"{round(d['user_cpu_s'])} s of user and {round(d['system_cpu_s'])} s",
               f"peak RSS {d['max_rss_kb'] / 1e6:.1f} GB",
               f"load average {before:.1f} at the start and {after:.1f} at the end",
-              f"{d['trial_counts']['simulated']:,} trials simulated for "
-              f"{d['trial_counts']['requested']:,} learner grasps",
+              (f"{d['trial_counts']['simulated']:,} trials simulated for "
+               f"{d['trial_counts']['requested']:,} learner grasps"),
               f"code of commit {d['git_commit'][:7]}",
               "about as long as with whole networks"):
         assert q in text, q
@@ -420,7 +425,7 @@ def test_every_number_in_the_prose_is_checked():
                "-0.02", "-0.07", "-0.1", "-0.10", "-0.16", "-0.23", "-0.4", "-0.5", "-1.0",
                "-2.0", "-2.3", "0.00012", "0.0002", "0.017", "92.2", "93.1",
                "0.67", "0.79", "0.91", "0.96", "1.01", "1.06", "1.16", "1.19", "1.23", "1.24",
-               "1.29", "1.3", "1.36", "1.39", "1.41", "1.60", "1.8", "11.6", "2.06", "2.12",
+               "1.29", "1.39", "1.41", "1.60", "1.8", "11.6", "2.06", "2.12",  # 1.3, 1.36: above
                "2.23", "2.66", "3.40", "3.6", "3.61", "3.86", "3.87",
                # the idle bench (test_bench_ratios_idle)
                "1.6", "3.8",  # the idle run under today's defaults
@@ -641,8 +646,8 @@ def test_merge_replaces_learners_only_when_the_reference_is_bit_identical(tmp_pa
     grasp_baselines.collect(out)
     capsys.readouterr()
     again = np.load(out / "per_seed.npz")
-    for f in first:
-        np.testing.assert_array_equal(again[f], first[f])
+    for f, value in first.items():
+        np.testing.assert_array_equal(again[f], value)
 
 
 SHARED_DIR = SRC / "ensemble_shared"

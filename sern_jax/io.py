@@ -50,28 +50,28 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "DIGEST_KEY",
+    "LOCK_FILE",
+    "DamagedFileError",
+    "RunLockedError",
+    "check_run_dir",
     "fmt_bytes",
     "fmt_time",
-    "peak_rss_mb",
-    "make_run_dir",
-    "check_run_dir",
-    "save_json",
-    "save_text",
-    "save_bytes",
     "load_json",
-    "save_npz",
     "load_npz",
-    "verify_npz",
     "load_npz_unit",
-    "npz_unit_done",
-    "DamagedFileError",
-    "DIGEST_KEY",
-    "run_lock",
-    "RunLockedError",
-    "LOCK_FILE",
-    "run_metadata",
     "machine",
+    "make_run_dir",
+    "npz_unit_done",
+    "peak_rss_mb",
+    "run_lock",
+    "run_metadata",
+    "save_bytes",
+    "save_json",
+    "save_npz",
+    "save_text",
     "to_jsonable",
+    "verify_npz",
 ]
 
 
@@ -84,7 +84,8 @@ def make_run_dir(root: str | os.PathLike, name: str, *, exist_ok: bool = True) -
 
 
 def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
-                  flag: str = "--out") -> None:
+                  flag: str = "--out", what: str = "experiment",
+                  checkpoint: str | None = None, advice: str | None = None) -> None:
     """Refuses a run directory made with other settings, before anything is computed.
 
     A run directory may be absent (a new run), or a directory without ``config.json`` (a run
@@ -92,20 +93,42 @@ def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
     same experiment, which then resumes). Anything else is refused, so one directory never
     mixes results of two settings. Reads only; writes nothing.
 
+    Runs that save a checkpoint before their ``config.json`` (``sern grasp learn`` writes
+    ``config.json`` when it finishes) name it: its ``"fingerprint"`` array must match too,
+    and it is checked first, verified (:func:`load_npz`), so a run stopped before its end is
+    never resumed by other settings either.
+
     Args:
       run_dir: the run directory the command was given.
       fingerprint: the experiment's fingerprint (``<Experiment>.fingerprint()``), compared
         with ``config.json``'s ``"fingerprint"`` field.
       flag: the command-line flag that named ``run_dir``, quoted in the messages.
+      what: what the directory holds, in the message (``"learning run"``).
+      checkpoint: a verified npz file in ``run_dir`` (e.g. ``"checkpoint.npz"``) whose
+        ``"fingerprint"`` member must equal ``fingerprint`` when it exists; None: none.
+      advice: the end of the message when that checkpoint is damaged (:func:`load_npz`);
+        default: delete it, or choose another ``flag``.
 
     Raises:
       ValueError: one line naming ``flag`` or the directory: ``run_dir`` exists and is not a
-        directory; its ``config.json`` is unreadable (or not a JSON object); or it holds a
-        different fingerprint.
+        directory; the checkpoint is damaged (:class:`DamagedFileError`); its ``config.json``
+        is unreadable (or not a JSON object); or either holds a different fingerprint.
     """
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"{flag} {run_dir} exists and is not a directory")
+
+    def refuse(old) -> None:
+        raise ValueError(f"{run_dir} holds a different {what} (fingerprint {old} != "
+                         f"{fingerprint}); choose another {flag} or delete it")
+
+    if checkpoint is not None and (run_dir / checkpoint).exists():
+        saved = load_npz(run_dir / checkpoint,
+                         advice=advice or f"delete it (or choose another {flag}) and rerun")
+        old = saved.get("fingerprint")
+        old = None if old is None else str(old)
+        if old != fingerprint:
+            refuse(old)
     cfg_path = run_dir / "config.json"
     if not cfg_path.exists():
         return
@@ -113,12 +136,10 @@ def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
         old = load_json(cfg_path)
     except (OSError, ValueError):
         old = None
-    if not isinstance(old, dict):  # noqa: TRY004 (commands turn ValueError into exit 2)
-        raise ValueError(f"{cfg_path} is unreadable; choose another {flag} or delete it")
+    if not isinstance(old, dict):  # commands turn ValueError into exit 2: not a TypeError
+        raise ValueError(f"{cfg_path} is unreadable; choose another {flag} or delete it")  # noqa: TRY004
     if old.get("fingerprint") != fingerprint:
-        raise ValueError(f"{run_dir} holds a different experiment (fingerprint "
-                         f"{old.get('fingerprint')} != {fingerprint}); choose another "
-                         f"{flag} or delete it")
+        refuse(old.get("fingerprint"))
 
 
 def _umask() -> int:
@@ -414,7 +435,7 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
                 f"{run_dir}: this filesystem refuses file locks ({exc.strerror or exc}); "
                 "use a run directory on a local or lock-capable filesystem") from None
         info = {"pid": os.getpid(), "host": socket.gethostname(),
-                "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "started": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                 "command": command if command is not None else " ".join(
                     [Path(sys.argv[0]).name, *sys.argv[1:]])}
         os.ftruncate(fd, 0)
@@ -458,13 +479,14 @@ def _git_commit() -> str | None:
     here = Path(__file__).resolve().parent
     try:
         out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
+            check=False,
         )
         if out.returncode != 0:
             return None
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=here, capture_output=True, text=True, timeout=5,
+            cwd=here, capture_output=True, text=True, timeout=5, check=False,
         ).stdout.strip()
         return out.stdout.strip() + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
@@ -523,7 +545,7 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
         except md.PackageNotFoundError:
             versions[pkg] = None
     meta: dict[str, Any] = {
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "versions": versions,
         "python": platform.python_version(),
         "git_commit": _git_commit(),

@@ -10,18 +10,18 @@ import contextlib
 import json
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from sern_jax.commands import validate
 
 __all__ = [
     "add_dataset_parser",
+    "add_learn_parser",
     "add_pretrain_parser",
     "add_screen_parser",
-    "add_learn_parser",
-    "run_learn",
     "format_table",
+    "run_learn",
 ]
 
 _FMT = argparse.ArgumentDefaultsHelpFormatter
@@ -366,7 +366,9 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
     p.add_argument("--no-figures", action="store_true")
     p.add_argument("--no-progress", action="store_true")
-    from sern_jax import distributed  # --ray [ADDRESS]: one Ray task per object (issue 20)
+    from sern_jax import (
+        distributed,  # --ray [ADDRESS]: one Ray task per object (issue 20)
+    )
 
     distributed.add_arguments(p)
     p.set_defaults(func=lambda args: run_learn(args, make_figures=make_figures))
@@ -389,12 +391,12 @@ def format_table(rows: list[dict]) -> str:
         cells += [f"{m:.0f}% (±{s:.2f})" for m, s in zip(r["rounds"], r["std"])]
         cells += [_pct(r["max"]), "—" if r["imprv"] is None else f"{100 * r['imprv']:.0f}%"]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "(± = population standard deviation over the seeds, ddof 0: `std` in "
-              "table.json, which also has `sd` (ddof 1) and `se` = sd/√seeds, the statistic "
-              "the paper's Table I prints in parentheses.)"]
+    lines += ["", ("(± = population standard deviation over the seeds, ddof 0: `std` in "
+                   "table.json, which also has `sd` (ddof 1) and `se` = sd/√seeds, the "
+                   "statistic the paper's Table I prints in parentheses.)")]
     if "lowvar_rounds" in rows[0]:
-        lines += ["", "Low-variance evaluation (greedy success probability on fixed poses, "
-                  "mean over seeds; round 0 = θ0):", ""]
+        lines += ["", ("Low-variance evaluation (greedy success probability on fixed "
+                       "poses, mean over seeds; round 0 = θ0):"), ""]
         head = ["Obj.", "Alg."] + [f"R{i}" for i in range(num_r + 1)]
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in rows:
@@ -402,9 +404,9 @@ def format_table(rows: list[dict]) -> str:
                 f"{m:.0f}% (±{s:.1f})" for m, s in zip(r["lowvar_rounds"], r["lowvar_std"])]
             lines.append("| " + " | ".join(cells) + " |")
     if "pseudo_regret" in rows[0]:
-        lines += ["", "Pseudo-regret per round (expected successes lost to the best candidate "
-                  "over the round's exploration grasps, oracle from --regret-trials trials per "
-                  "candidate; mean ± std over seeds):", ""]
+        lines += ["", ("Pseudo-regret per round (expected successes lost to the best "
+                       "candidate over the round's exploration grasps, oracle from "
+                       "--regret-trials trials per candidate; mean ± std over seeds):"), ""]
         head = ["Obj.", "Alg."] + [f"Round {i + 1}" for i in range(num_r)] + ["Total"]
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in rows:
@@ -492,19 +494,16 @@ def _check_learn_values(args, policies: tuple[str, ...]) -> None:
                               low=0, low_open=True, float32_normal=True)
 
 
-def _checkpoint_precheck(out: Path, fingerprint: str) -> None:
-    """A resumed run's checkpoint, verified and matched before anything is written: a
-    damaged file is named in one line, another run's directory is left untouched."""
+def _check_run_dir(out: Path, fingerprint: str) -> None:
+    """The run directory, before anything is written (:func:`io.check_run_dir`, the check
+    the regret commands make): its checkpoint (verified; a damaged file is named in one line)
+    and its ``config.json`` must both hold this run's fingerprint, so another run's directory,
+    a learn run's or any other command's, is left untouched, and the same settings resume."""
     from sern_jax import io
 
-    ckpt = out / "checkpoint.npz"
-    if not ckpt.exists():
-        return
-    saved = io.load_npz(ckpt, advice="delete it to restart the run from round 0 (or "
-                                      "choose another --out)")
-    if str(saved.get("fingerprint")) != fingerprint:
-        raise ValueError(f"{out} holds a different learning run; choose another --out or "
-                         "delete it")
+    io.check_run_dir(out, fingerprint, what="learning run", checkpoint="checkpoint.npz",
+                     advice="delete it to restart the run from round 0 (or choose another "
+                            "--out)")
 
 
 def check_learn_args(args, num_objects: int | None = None):
@@ -564,7 +563,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     t0 = time.perf_counter()
     fingerprint = runner.run_fingerprint(config, specs, theta0)
     out = Path(args.out) if args.out else Path("runs") / ("learn-" + fingerprint)
-    _checkpoint_precheck(out, fingerprint)
+    _check_run_dir(out, fingerprint)
     with validate.locked_run_dir(out):
         if ray is None:
             res = runner.run(config, specs, out, theta0=theta0,

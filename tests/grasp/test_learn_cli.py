@@ -179,3 +179,65 @@ def test_reproduce_summary_leads_with_paired_t_intervals_and_holm(tmp_path):
     row = next(ln for ln in lines if want in ln)
     assert row.endswith(": sign resolved")
     assert "better on" not in text
+
+
+class _RunnerReached(Exception):
+    """Raised by the stand-in for runner.run: the command got past its run-directory check."""
+
+
+def _learn(out, *extra):
+    from sern_jax.commands import main as cli
+
+    return cli.main(["grasp", "learn", "pipe_tee", "--no-progress", "--no-figures",
+                     "--seeds", "2", "--rounds", "1", "--out", str(out), *extra])
+
+
+def _listing(root):
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file()}
+
+
+def test_learn_run_dir_check_is_ios(tmp_path, monkeypatch, capsys):
+    """`sern grasp learn` checks its run directory with io.check_run_dir (config.json and
+    the checkpoint): another run's directory without a checkpoint (a finished `sern regret`
+    run, or a learn run whose checkpoint was removed) is refused in one line, exit 2, left
+    byte-identical and the runner never starts; the same settings resume (the runner is
+    reached); other settings are refused whichever file holds the fingerprint."""
+    from sern_jax.grasp import runner
+
+    reached = []
+
+    def fake_run(config, specs, out, theta0=None, **kw):
+        fp = runner.run_fingerprint(config, specs, theta0)
+        reached.append(fp)
+        io.save_npz(out / "checkpoint.npz", fingerprint=np.str_(fp), next_round=np.int64(1))
+        io.save_json(out / "config.json", {"fingerprint": fp})
+        raise _RunnerReached
+
+    monkeypatch.setattr(runner, "run", fake_run)
+    other = tmp_path / "regret_run"  # another command's finished run: config.json only
+    other.mkdir()
+    io.save_json(other / "config.json", {"fingerprint": "0123456789abcdef"})
+    before = _listing(other)
+    assert _learn(other) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds a different learning run (fingerprint 0123456789abcdef" \
+        in err[0] and "--out" in err[0], err
+    assert _listing(other) == before and not reached
+
+    run = tmp_path / "learn"
+    with pytest.raises(_RunnerReached):  # a new run
+        _learn(run)
+    with pytest.raises(_RunnerReached):  # the same settings resume
+        _learn(run)
+    assert len(reached) == 2 and reached[0] == reached[1]
+    capsys.readouterr()
+    before = _listing(run)
+    assert _learn(run, "--explore", "3") == 2  # other settings: checkpoint and config.json
+    (run / "checkpoint.npz").unlink()
+    before_config_only = _listing(run)
+    assert _learn(run, "--explore", "3") == 2  # config.json alone still refuses
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("holds a different learning run" in e for e in err), err
+    assert _listing(run) == before_config_only and len(reached) == 2
+    assert set(before) - set(before_config_only) == {"checkpoint.npz"}

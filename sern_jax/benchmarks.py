@@ -32,6 +32,9 @@ the shared :class:`BanditSetup`; a new way is one more such function and one mor
 * ``naive_jax``: :func:`naive_jax_bandit`, the ~40-line ``jit(vmap(scan))`` bandit a JAX
   user writes first (softmax recomputed every round, ``jax.random`` keys per round, plain
   float32 sums, final regret and counts only), the peer the engine must beat.
+* ``pallas`` (``pallas=True``, issue 20 stretch): :mod:`sern_jax.pallas_softmax`, the fused
+  kernel that keeps each seed's state on chip across rounds, on the fast path's keys; its
+  outputs are compared with the fast path's seed by seed (``regret_agreement``).
 
 ``policy="thompson"`` runs Beta-Bernoulli Thompson sampling instead (Beta(1 + S, 1 + F)
 posteriors, argmax): the fast path is :mod:`sern_jax.fast_thompson`, the NumPy reference draws
@@ -76,6 +79,7 @@ class BanditWorkload:
     naive_repeats: int = 1  # timed runs of the naive jit(vmap(scan)) peer (0 skips it)
     summary_repeats: int = -1  # timed runs of run_seeds(summary=True) (-1: repeats; 0 skips)
     smpybandits_seeds: int = 0  # seeds of SMPyBandits' Thompson (policy thompson; 0 skips)
+    pallas: bool = False  # also the fused Pallas kernel (sern_jax.pallas_softmax; softmax)
 
 
 BENCH_POLICIES = ("softmax", "thompson")
@@ -101,7 +105,7 @@ def bandit_memory_bytes(w: BanditWorkload) -> int:
     from sern_jax import executor
 
     config, _ = bandit_config(w)
-    return (w.seeds * executor.bytes_per_seed(config)
+    return (w.seeds * executor.bytes_per_seed(config) * (2 if w.pallas else 1)
             + (w.numpy_seeds + w.smpybandits_seeds) * (4 * w.arms + 64) * 8)
 
 
@@ -463,6 +467,25 @@ def _path_smpybandits(s: BanditSetup):
     return entry, t.result
 
 
+def _path_pallas(s: BanditSetup):
+    """The fused kernel (issue 20 stretch) on the fast path's keys: its outputs are compared
+    with the fast engine's seed by seed. Triton on a GPU, Pallas' interpreter elsewhere."""
+    import jax
+
+    from sern_jax import pallas_softmax
+    from sern_jax import simulate as sim
+
+    w = s.workload
+    fn = pallas_softmax.make_pallas_run(s.config, interpret=s.backend != "gpu")
+    keys = sim.seed_keys(s.root, w.seeds)  # fold_in keys: the fast path's first S seeds
+    compiled, compile_s = _compile_s(jax.jit(fn), keys, s.params)
+    t = timing.time_calls(lambda: compiled(keys, s.params), w.repeats, warmup=0)
+    out = jax.tree.map(np.asarray, t.result)
+    entry = {"engine_path": "sern_jax.pallas_softmax.make_pallas_run", **fn.info,
+             "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
+    return entry, out
+
+
 # ----------------------------------------------------------------------------- the benchmark
 
 
@@ -497,6 +520,9 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
     smpy_out = None
     if w.smpybandits_seeds and w.policy == "thompson":
         result["smpybandits"], smpy_out = _path_smpybandits(s)
+    pallas_out = None
+    if w.pallas:
+        result["pallas"], pallas_out = _path_pallas(s)
 
     # ---- agreement of mean regret (different random streams: compare with standard errors)
     agree: dict[str, Any] = {}
@@ -535,6 +561,16 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         agree["smpybandits_mean_regret_T"] = sm_m
         agree["smpybandits_se"] = sm_se
         agree["z_fast_vs_smpybandits"] = (fm - sm_m) / max(np.hypot(fse, sm_se), 1e-12)
+    if pallas_out is not None:  # same keys as the fast path: compare seed by seed
+        same = np.all(pallas_out.counts == fast_out.counts, axis=(1, 2))
+        agree["pallas_mean_regret_T"] = mean_se(pallas_out.regret[:, -1])[0]
+        agree["pallas_counts_equal_fast_fraction"] = float(same.mean())
+        for name in ("regret", "regret_rb", "compensator", "min_prob"):
+            a, b = getattr(pallas_out, name), getattr(fast_out, name)
+            agree[f"pallas_{name}_equal_fast_fraction"] = float(np.mean(np.all(
+                (a == b).reshape(a.shape[0], -1), axis=1)))
+            agree[f"pallas_{name}_max_abs_diff_vs_fast"] = float(np.max(np.abs(
+                a.astype(np.float64) - b)))
     result["regret_agreement"] = agree
 
     # ---- headline
@@ -587,4 +623,9 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         "jax_version": jax.__version__,
         "jax_threefry_partitionable": bool(jax.config.jax_threefry_partitionable),
     })
+    # issue 20 stretch: the fused Pallas kernel beside the engine's fast path (--pallas)
+    result["pallas_seed_rounds_per_s"] = (result["pallas"]["seed_rounds_per_s"]
+                                          if "pallas" in result else None)
+    result["pallas_over_fast"] = (result["pallas"]["seed_rounds_per_s"] / rates["fast"]
+                                  if "pallas" in result else None)
     return result

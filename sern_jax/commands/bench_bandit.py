@@ -49,6 +49,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--smpybandits-seeds", type=int, default=0,
                    help="seeds of SMPyBandits' Thompson on the same instance, one at a time "
                         "(--policy thompson; needs SMPyBandits installed; default 0 skips)")
+    p.add_argument("--pallas", action="store_true",
+                   help="also time the fused Pallas kernel (sern_jax.pallas_softmax; softmax, "
+                        "one GPU) and compare its outputs with the fast path's seed by seed")
     p.set_defaults(func=run)
     return p
 
@@ -95,6 +98,19 @@ def _validate(args) -> None:
             benchmarks.smpybandits_thompson()
         except ImportError as e:
             raise ValueError(f"--smpybandits-seeds: {e}") from None
+    if args.pallas:
+        if args.policy != "softmax":
+            raise ValueError("--pallas needs --policy softmax (the kernel is SERN softmax's)")
+        if args.devices > 1:
+            raise ValueError("--pallas runs on one device: use --devices 0 or 1")
+        if not 16 <= args.arms <= 1024 or args.arms & (args.arms - 1):
+            raise ValueError(f"--pallas needs --arms a power of two in [16, 1024], got "
+                             f"{args.arms}")
+        import jax
+
+        if jax.default_backend() != "gpu":
+            raise ValueError(f"--pallas needs a GPU (backend {jax.default_backend()!r}); "
+                             "off-GPU the kernel only runs in Pallas' slow interpreter")
 
 
 def _workload(args):
@@ -105,7 +121,8 @@ def _workload(args):
         repeats=args.repeats, numpy_seeds=args.numpy_seeds,
         general_repeats=args.general_repeats, devices=args.devices, chunk=args.chunk,
         seed=args.seed, policy=args.policy, naive_repeats=args.naive_repeats,
-        summary_repeats=args.summary_repeats, smpybandits_seeds=args.smpybandits_seeds)
+        summary_repeats=args.summary_repeats, smpybandits_seeds=args.smpybandits_seeds,
+        pallas=args.pallas)
 
 
 def _check_memory(workload) -> None:
@@ -149,7 +166,8 @@ def _table(result: dict, w) -> str:
             ("naive_jax", w.seeds, "naive_jax_mean_regret_T"),
             ("general", w.seeds, "general_mean_regret_T"),
             ("numpy", w.numpy_seeds, "numpy_mean_regret_T"),
-            ("smpybandits", w.smpybandits_seeds, "smpybandits_mean_regret_T")]
+            ("smpybandits", w.smpybandits_seeds, "smpybandits_mean_regret_T"),
+            ("pallas", w.seeds, "pallas_mean_regret_T")]
     for name, seeds, regret in rows:
         if name not in result:
             continue

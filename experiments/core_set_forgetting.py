@@ -18,13 +18,13 @@ with Student-t intervals over seeds, and the core sets' paired differences with 
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
 import time
 from pathlib import Path
 
+from sern_jax.commands import validate
 
 KINDS = ("none", "random", "dpp")
 METRICS = (("d0", "roc_auc"), ("d0", "bce"), ("new", "roc_auc"))
@@ -69,29 +69,23 @@ def summarise(results: dict) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
+    count = validate.int_at_least(1)
     parser.add_argument("--object", default="tless_part_a")
-    parser.add_argument("--online-poses", type=int, default=4,
+    parser.add_argument("--online-poses", type=count, default=4,
                         help="poses of the new object whose grasps form the online data")
-    parser.add_argument("--test-poses", type=int, default=4)
-    parser.add_argument("--test-trials", type=int, default=8)
-    parser.add_argument("--d0-objects", type=int, default=6)
-    parser.add_argument("--d0-poses", type=int, default=2)
-    parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--steps", type=int, default=200)
-    parser.add_argument("--batch-size", type=int, default=32)
+    parser.add_argument("--test-poses", type=count, default=4)
+    parser.add_argument("--test-trials", type=count, default=8)
+    parser.add_argument("--d0-objects", type=count, default=6)
+    parser.add_argument("--d0-poses", type=count, default=2)
+    parser.add_argument("--seeds", type=count, default=4)
+    parser.add_argument("--steps", type=count, default=200)
+    parser.add_argument("--batch-size", type=count, default=32)
     parser.add_argument("--lr", type=float, default=3e-4)
     parser.add_argument("--out", default="runs/forgetting")
     args = parser.parse_args(argv)
-
-    def bad(message):  # bad input: one line naming the flag, exit 2, before any compile
-        print(f"error: {message}", file=sys.stderr)
-        raise SystemExit(2)
-
-    for name in ("online_poses", "test_poses", "test_trials", "d0_objects", "d0_poses",
-                 "seeds", "steps", "batch_size"):
-        if getattr(args, name) < 1:
-            bad(f"--{name.replace('_', '-')} must be >= 1")
+    bad = parser.error
     if not (math.isfinite(args.lr) and args.lr > 0):
         bad(f"--lr must be a finite number > 0 (got {args.lr})")
 

@@ -43,7 +43,6 @@ a ``checkpoint.npz``), ``tuned.json`` (every tuning score and the choice),
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -863,7 +862,10 @@ def record_learn_timing(run_dir: Path, summary_json: Path, time_file: Path) -> d
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    p = validate.script_parser(__spec__, description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("bench", "tune", "run", "collect", "summarize",
                                     "record-learn", "merge"))
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -872,7 +874,8 @@ def main(argv=None) -> None:
     p.add_argument("--tune-rounds", type=int, default=3, help="tune: rounds per setting")
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--explore", type=int, default=20, help="grasps per exploration phase")
-    p.add_argument("--objects", type=int, default=None, help="first N of the hard set")
+    p.add_argument("--objects", type=validate.int_at_least(1), default=None,
+                   help="first N of the hard set")
     p.add_argument("--regret-trials", type=int, default=0,
                    help="run: oracle trials per candidate (x2: selection and valuation)")
     p.add_argument("--regret-grasps", type=int, default=0,

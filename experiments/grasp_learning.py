@@ -33,7 +33,6 @@ Options: --objects N (first N of the hard set), --only a,b (those hard-set objec
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shlex
 import sys
@@ -447,9 +446,13 @@ def collect(out, results) -> list[Path]:
 
 
 def main(argv=None) -> int:
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in ("summarise", "collect"):
-        p = argparse.ArgumentParser(prog=f"experiments.grasp_learning {argv[0]}")
+        p = validate.script_parser(__spec__)
+        p.prog = f"{p.prog} {argv[0]}"
         p.add_argument("dirs", nargs=1 if argv[0] == "summarise" else 2)
         a = p.parse_args(argv[1:])
         if argv[0] == "collect":
@@ -464,24 +467,24 @@ def main(argv=None) -> int:
         print(f"wrote {Path(a.dirs[0]) / 'summary.json'}")
         return 0
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
     parser.add_argument("setting", choices=SETTINGS + ("ablations",))
     parser.add_argument("--labels", default="",
                         help="comma-separated run labels (or setting/label) to run of the "
                              "setting's list (default: all)")
-    parser.add_argument("--objects", type=int, default=None,
+    parser.add_argument("--objects", type=validate.int_at_least(1), default=None,
                         help="first N objects of the hard set (default 6; regret 3)")
     parser.add_argument("--only", default="", help="comma-separated hard-set objects")
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--seeds", type=validate.int_at_least(1), default=5)
+    parser.add_argument("--rounds", type=validate.int_at_least(1), default=5)
     parser.add_argument("--out", default=None)
     parser.add_argument("--results", default=None,
                         help="per-seed results directory (default experiments/results/SETTING)")
     parser.add_argument("--backend", choices=("native", "mjx"), default="native",
                         help="trial physics: native MuJoCo (CPU) or MJX (GPU)")
-    parser.add_argument("--regret-trials", type=int, default=0,
+    parser.add_argument("--regret-trials", type=validate.int_at_least(0), default=0,
                         help="regret: oracle trials per candidate, each set (default 4)")
-    parser.add_argument("--regret-grasps", type=int, default=0,
+    parser.add_argument("--regret-grasps", type=validate.int_at_least(0), default=0,
                         help="regret: oracle on the first G grasps of each phase (default 5)")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)

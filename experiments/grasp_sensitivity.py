@@ -59,7 +59,6 @@ peer in B with Holm over every cell, peer and round.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import itertools
 import json
@@ -783,7 +782,11 @@ def _run_grid(args, transfer: bool = False) -> int:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser;
+    # the subcommands' parsers are of its class)
+    parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
     p_run = sub.add_parser("run", help="run the grid's cells in worker processes")
     p_cell = sub.add_parser("cell", help="run one cell in this process")

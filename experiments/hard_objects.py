@@ -32,7 +32,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -175,19 +174,21 @@ def table(results) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    ap = validate.script_parser(__spec__, description=__doc__.split("\n\n")[0])
+    count = validate.int_at_least(1)
     ap.add_argument("--objects", default=DEFAULT_OBJECTS,
                     help="comma-separated names; 'hard' expands to the hard set "
                          f"(default {DEFAULT_OBJECTS})")
-    ap.add_argument("--poses", type=int, default=8)
-    ap.add_argument("--trials", type=int, default=16)
+    ap.add_argument("--poses", type=count, default=8)
+    ap.add_argument("--trials", type=count, default=16)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=None,
+    ap.add_argument("--threads", type=count, default=None,
                     help="native threads (default: all cores)")
     ap.add_argument("--out", default=None, help="JSON file to write")
     args = ap.parse_args(argv)
-    if args.poses < 1 or args.trials < 1:
-        raise ValueError("--poses and --trials must be >= 1")
 
     from sern_jax.grasp import objects as objects_lib
 

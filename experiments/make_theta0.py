@@ -12,47 +12,60 @@ equivalent ``sern grasp`` commands, the seeds, the machine, the simulated world
 
 from __future__ import annotations
 
-import argparse
 import json
+import re
 import time
 from pathlib import Path
 
+# the config fields behind the flags, for the configs' messages
+_FLAGS = {"num_objects": "--objects", "poses_per_object": "--poses", "epochs": "--epochs",
+          "heldout_objects": "--heldout-objects", "heldout_poses": "--heldout-poses",
+          "heldout_trials": "--heldout-trials", "core_k": "--core-k"}
+
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
+    count = validate.int_at_least(1)
     parser.add_argument("--out", default="runs/theta0")
-    parser.add_argument("--objects", type=int, default=200)
-    parser.add_argument("--poses", type=int, default=16)
-    parser.add_argument("--epochs", type=int, default=8)
-    parser.add_argument("--screen-poses", type=int, default=8)
-    parser.add_argument("--screen-trials", type=int, default=16)
-    parser.add_argument("--fresh-trials", type=int, default=None,
+    parser.add_argument("--objects", type=count, default=200)
+    parser.add_argument("--poses", type=count, default=16)
+    parser.add_argument("--epochs", type=count, default=8)
+    parser.add_argument("--screen-poses", type=count, default=8)
+    parser.add_argument("--screen-trials", type=count, default=16)
+    parser.add_argument("--fresh-trials", type=count, default=None,
                         help="trials that value each pose's chosen best candidate, "
                              "independent of the screening trials (default: as many)")
-    parser.add_argument("--heldout-objects", type=int, default=12)
-    parser.add_argument("--heldout-poses", type=int, default=4)
-    parser.add_argument("--heldout-trials", type=int, default=16)
-    parser.add_argument("--core-k", type=int, default=172)
+    parser.add_argument("--heldout-objects", type=count, default=12)
+    parser.add_argument("--heldout-poses", type=count, default=4)
+    parser.add_argument("--heldout-trials", type=count, default=16)
+    parser.add_argument("--core-k", type=count, default=172)
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
 
     from sern_jax import io
     from sern_jax.grasp import dataset, objects, pretrain
 
+    try:  # the configs' own ranges (--core-k above the k-DPP's rank, ...) before any work
+        d0_config = dataset.DatasetConfig(num_objects=args.objects, poses_per_object=args.poses)
+        pretrain_config = pretrain.PretrainConfig(
+            epochs=args.epochs, heldout_objects=args.heldout_objects,
+            heldout_poses=args.heldout_poses, heldout_trials=args.heldout_trials,
+            core_k=args.core_k)
+    except ValueError as exc:
+        parser.error(re.sub(r"\b(" + "|".join(_FLAGS) + r")\b",
+                            lambda m: _FLAGS[m.group(1)], str(exc)))
     out = Path(args.out)
     timings = {}
     t = time.perf_counter()
-    summary = dataset.generate(
-        dataset.DatasetConfig(num_objects=args.objects, poses_per_object=args.poses),
-        out / "d0", progress=not args.no_progress)
+    summary = dataset.generate(d0_config, out / "d0", progress=not args.no_progress)
     timings["dataset_s"] = time.perf_counter() - t
     print(json.dumps(summary), flush=True)
     t = time.perf_counter()
-    manifest = pretrain.pretrain(out / "d0", pretrain.PretrainConfig(
-        epochs=args.epochs, heldout_objects=args.heldout_objects,
-        heldout_poses=args.heldout_poses, heldout_trials=args.heldout_trials,
-        core_k=args.core_k),
-                                 out / "theta0", progress=not args.no_progress)
+    manifest = pretrain.pretrain(out / "d0", pretrain_config, out / "theta0",
+                                 progress=not args.no_progress)
     timings["pretrain_s"] = time.perf_counter() - t
     from sern_jax.grasp import artifacts
 

@@ -98,6 +98,10 @@ def check(num_seeds: int = 5, num_grasps: int = 5) -> dict:
 
 
 def main(argv=None) -> int:
+    from sern_jax.commands import validate
+
+    # no flags of its own: anything else is one line, exit 2 (validate's parser); --help
+    validate.script_parser(__spec__, description=__doc__.splitlines()[0]).parse_args(argv)
     res = check()
     print(f"{res['cells']} cells; means on the 4 % grid of 5 seeds x 5 grasps: "
           f"{res['means_on_grid']}")

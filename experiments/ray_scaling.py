@@ -394,15 +394,19 @@ def _d0_sampled(args, argv, cache: str, started: float) -> int:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    p = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
+    count = validate.int_at_least(1)
     p.add_argument("--workers", default="1,4,8", help="comma list of worker counts")
     p.add_argument("--mode", choices=("weak", "strong", "default-d0", "d0-sampled"),
                    default="weak")
     p.add_argument("--full-workers", default="8,4",
                    help="default-d0: worker counts that run every object")
-    p.add_argument("--sample-every", type=int, default=8,
+    p.add_argument("--sample-every", type=count, default=8,
                    help="default-d0: the one-worker run takes every k-th object")
-    p.add_argument("--sample-size", type=int, default=24,
+    p.add_argument("--sample-size", type=count, default=24,
                    help="d0-sampled: objects in the one-worker run's random sample")
     p.add_argument("--sample-seed", type=int, default=20261124,
                    help="d0-sampled: numpy.random.default_rng seed of the sample")
@@ -410,11 +414,11 @@ def main(argv=None) -> int:
         p.add_argument(hidden, default=None, help=argparse.SUPPRESS)
     p.add_argument("--child-workers", type=int, default=1, help=argparse.SUPPRESS)
     p.add_argument("--child-sample", type=int, default=0, help=argparse.SUPPRESS)
-    p.add_argument("--per-worker", type=int, default=8, help="weak: objects per worker")
-    p.add_argument("--objects", type=int, default=None,
+    p.add_argument("--per-worker", type=count, default=8, help="weak: objects per worker")
+    p.add_argument("--objects", type=count, default=None,
                    help="strong: objects in every run (default 16); default-d0: D0's "
                         "objects (default 200, the default D0)")
-    p.add_argument("--poses", type=int, default=16, help="poses per object (D0: 16)")
+    p.add_argument("--poses", type=count, default=16, help="poses per object (D0: 16)")
     p.add_argument("--unpinned", type=lambda t: [int(w) for w in t.split(",") if w],
                    default=[], help="worker counts to run again without core pinning")
     p.add_argument("--out", type=Path, default=Path("runs/ray-scaling"))
@@ -427,7 +431,10 @@ def main(argv=None) -> int:
     if args.child_json:
         args.child_out = Path(args.child_out)
         return _child(args)
-    workers = [int(w) for w in args.workers.split(",")]
+    try:
+        workers = [int(w) for w in args.workers.split(",")]
+    except ValueError:
+        p.error(f"--workers must be a comma list of integers, got {args.workers!r}")
     if 1 not in workers or any(w < 1 for w in workers):
         p.error("--workers must include 1 (the reference) and be positive")
     cache = args.cache or str((args.out / ".jax_cache").resolve())

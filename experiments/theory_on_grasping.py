@@ -36,7 +36,6 @@ context and seed); ``figures/make_theory_grasping_fig.py`` draws them.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -202,26 +201,24 @@ def split_test(counts, n1, n2):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any work (validate's parser)
+    parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
+    count = validate.int_at_least(1)
     parser.add_argument("--objects", default=None,
                         help="comma-separated names (default: the shipped hard set)")
-    parser.add_argument("--contexts", type=int, default=8)
-    parser.add_argument("--trials", type=int, default=16,
+    parser.add_argument("--contexts", type=count, default=8)
+    parser.add_argument("--trials", type=count, default=16,
                         help="trials of every valid candidate (the pipeline's table)")
     parser.add_argument("--top", type=int, default=8,
                         help="candidates (best on --trials) that get --deep-trials")
-    parser.add_argument("--deep-trials", type=int, default=256)
-    parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--deep-trials", type=count, default=256)
+    parser.add_argument("--seeds", type=count, default=4)
+    parser.add_argument("--steps", type=count, default=100)
     parser.add_argument("--out", default="runs/theory_grasping")
     args = parser.parse_args(argv)
-    def bad(message):  # bad input: one line naming the flag, exit 2, before any work
-        print(f"error: {message}", file=sys.stderr)
-        raise SystemExit(2)
-
-    for name in ("contexts", "trials", "seeds", "steps", "deep_trials"):
-        if getattr(args, name) < 1:
-            bad(f"--{name.replace('_', '-')} must be >= 1")
+    bad = parser.error
     if args.top < 2:
         bad("--top must be >= 2")
     if args.deep_trials < args.trials or args.trials < 2:

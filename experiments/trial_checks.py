@@ -26,14 +26,12 @@ iterations). Contexts are made with the default scene; only the trials change se
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import sys
 import time
 
 import numpy as np
-
 
 DEFAULT_OBJECTS = ("triangular_prism", "pipe_tee", "tless_part_a", "handle_jug",
                    "tless_part_b", "tless_part_c", "pipe_tee_steel", "bracket_steel",
@@ -103,20 +101,21 @@ def _per_object(sizes, names, *outs) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from sern_jax.commands import validate
+
+    # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
+    ap = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
+    count = validate.int_at_least(1)
     ap.add_argument("--objects", default=",".join(DEFAULT_OBJECTS),
                     help="comma-separated object names")
-    ap.add_argument("--poses", type=int, default=4)
-    ap.add_argument("--candidates", type=int, default=16)
+    ap.add_argument("--poses", type=count, default=4)
+    ap.add_argument("--candidates", type=count, default=16)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--forces", default="6,40",
                     help="grips (newtons per finger) to compare with the default")
-    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--threads", type=count, default=None)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    for name in ("poses", "candidates"):
-        if getattr(args, name) < 1:
-            ap.error(f"--{name} must be >= 1")
     names = [n for n in args.objects.split(",") if n]
     try:
         forces = [float(f) for f in args.forces.split(",") if f]

@@ -27,14 +27,7 @@ __all__ = [
 _FMT = argparse.ArgumentDefaultsHelpFormatter
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
+_positive_int = validate.int_at_least(1)  # argparse type: an integer >= 1
 
 
 def _check_out(path: str | None, what: str = "--out") -> None:

@@ -8,6 +8,10 @@ written (the bad-input promise of README and DESIGN).
   made and removed, a temporary file created and removed in the first existing ancestor), so
   ``/proc/x``, a read-only mount or a file where a directory must go are refused up front
   (``os.access`` says yes to root on ``/proc``).
+* :func:`script_parser`: the same parser for the experiment scripts (``python -m
+  experiments.NAME``, ``sern experiment NAME``), named as the user ran it; :func:`int_at_least`:
+  an integer flag's argparse ``type`` with a floor (``--seeds abc``, ``--seeds -1``: one line
+  ``... error: argument --seeds: ...``, exit 2, before anything is imported or compiled).
 * :func:`finite_float`: a float flag that must be finite and in range; ``float32_normal``
   refuses values that float32 cannot hold as a normal number (``--alpha 1e-300`` became 0 in
   float32, softmax returned NaN and SERN picked no grasp, with exit 0).
@@ -30,13 +34,15 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
-    "OneLineParser",
     "FLOAT32_TINY",
+    "OneLineParser",
     "finite_float",
     "float32_hyperparameters",
+    "int_at_least",
+    "locked_run_dir",
     "out_dir",
     "out_file",
-    "locked_run_dir",
+    "script_parser",
 ]
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)  # smallest normal float32, 1.1754944e-38
@@ -52,6 +58,46 @@ class OneLineParser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def script_parser(spec=None, **kwargs) -> OneLineParser:
+    """The :class:`OneLineParser` of an experiment script's ``main``.
+
+    Its ``prog`` is how the user ran the script: ``sern experiment NAME`` (the name that
+    command puts in ``sys.argv[0]``), else ``python -m <module>`` (the module's name from
+    its ``__spec__``; without one, a file run as ``python experiments/NAME.py``, argparse's
+    default, the file's name). Subparsers inherit the class, so their errors are one line
+    too; ``--help`` is unchanged.
+
+    Args:
+      spec: the script's ``__spec__`` (a ``ModuleSpec`` or None) or its module name.
+      **kwargs: passed on to ``argparse.ArgumentParser`` (``description``, ...).
+    """
+    module = spec if isinstance(spec, str) or spec is None else spec.name
+    if "prog" not in kwargs:
+        argv0 = sys.argv[0] if sys.argv else ""
+        if argv0.startswith("sern experiment "):
+            kwargs["prog"] = argv0
+        elif module and module != "__main__":
+            kwargs["prog"] = f"python -m {module}"
+    return OneLineParser(**kwargs)
+
+
+def int_at_least(low: int):
+    """An argparse ``type``: an integer >= ``low``. A bad value is argparse's one-line error
+    naming the flag (``argument --seeds: must be >= 1, got -1``), raised while parsing."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
 def finite_float(value: float, flag: str, *, low: float | None = None,
                  high: float | None = None, low_open: bool = False, high_open: bool = False,
                  float32_normal: bool = False) -> float:
@@ -59,7 +105,8 @@ def finite_float(value: float, flag: str, *, low: float | None = None,
     naming ``flag``. ``float32_normal``: a nonzero value must also be at least float32's
     smallest normal number in magnitude (it is used in float32 arithmetic)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ValueError(f"{flag} must be a number, got {value!r}")
+        # a ValueError, not a TypeError: the commands turn ValueError into exit 2
+        raise ValueError(f"{flag} must be a number, got {value!r}")  # noqa: TRY004
     value = float(value)
     lo_text = "-inf" if low is None else f"{low:g}"
     hi_text = "inf" if high is None else f"{high:g}"

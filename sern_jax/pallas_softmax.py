@@ -25,18 +25,17 @@ What one seed-round does (the same as :mod:`sern_jax.fast_softmax`, op for op):
 * every ``block`` rounds (and at every checkpoint) the prefix sums are recomputed from ``w``
   (``rebase``) and the block sums go into Kahan totals (``flush``), on the engine's schedule.
 
-Where the arithmetic may differ from the engine (all float32):
-
-* ``Σ_a w_a r_a`` at each rebase is ``sum(w·r)`` here and ``dot(w, r)`` in the engine: the
-  summation order differs, so the Rao–Blackwellised regret may differ by rounding (at most
-  about ``t·K·2^-23`` after t rounds; the arms, counts and realised regret do not depend on it);
-* the prefix sums at each rebase are ``jnp.cumsum`` in both. On CPU (``interpret=True``) both
-  are XLA's, so the draws, arms and outputs are bitwise the engine's (tested). On a GPU the
-  kernel's is Triton's scan and the engine's XLA's; a different summation order moves a CDF
-  boundary by an ulp and, rarely, an arm (``rebase="serial"`` sums left to right instead);
-  ``sern bench bandit --pallas`` reports the fraction of seeds whose counts equal the engine's;
-* on a GPU division is ``div.rn.f32`` (IEEE, as XLA), not Triton's default ``div.full.f32``;
-  ``exp`` is libdevice's ``__nv_expf`` in both.
+Same arithmetic as the engine (all float32), checked op by op against XLA on the H100
+(``experiments/results/bench/pallas_ops_probe_h100.json``): ``exp`` is libdevice's
+``__nv_expf`` in both (100 % equal), division is plain ``/`` (Triton's equals XLA's on 100 %;
+IEEE ``div.rn`` would not), ``a + b·c`` contracts to the same FMA in both (100 %), and the
+prefix sums at each rebase follow XLA's own order for the engine's ``jnp.cumsum``
+(:func:`_tiled_prefix_sums`). One difference is left: ``Σ_a w_a r_a`` at each rebase is
+``sum(w·r)`` here and ``dot(w, r)`` in the engine, so the Rao–Blackwellised regret may differ
+by rounding (at most about ``t·K·2^-23`` after t rounds); the arms do not depend on it.
+In Pallas' interpreter (CPU) every output equals the engine's bit for bit (tests); on the
+GPU ``sern bench bandit --pallas`` reports the fraction of seeds whose outputs equal the
+engine's.
 
 Use ``interpret=True`` off-GPU (tests); on a GPU the kernel compiles through Triton
 (``jax.experimental.pallas.triton.CompilerParams``; Mosaic GPU is JAX's default otherwise).
@@ -61,7 +60,7 @@ __all__ = ["supports", "make_pallas_run", "pad_seeds", "REBASE_MODES",
 
 DEFAULT_SEEDS_PER_PROGRAM = 16  # B: seeds one program instance owns (rows of its tiles)
 DEFAULT_NUM_WARPS = 4
-REBASE_MODES = ("auto", "scan", "sequential", "tiled16")
+REBASE_MODES = ("tiled16", "scan", "sequential")
 
 
 def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool:
@@ -81,27 +80,36 @@ def pad_seeds(num_seeds: int, seeds_per_program: int) -> int:
 
 
 def _tiled_prefix_sums(w: Array, tile: int) -> Array:
-    """``[B, K]`` prefix sums of ``w`` along K in a fixed order: left to right within tiles
-    of ``tile`` arms, plus the left-to-right sum of the earlier tiles' totals (``tile = K``:
-    plain left to right). This is the order of XLA's ``ReduceWindowRewriter`` for a cumsum
-    (base length ``tile``), which XLA:GPU applies to the engine's ``jnp.cumsum``.
+    """``[B, K]`` prefix sums of ``w`` along K in XLA's order for ``jnp.cumsum`` (its
+    ``ReduceWindowRewriter``, base length 16, on CPU and GPU alike; ``tile ≥ K``: plain left
+    to right): left to right within tiles of ``tile`` arms, then each tile plus the left-to-right
+    sum of the earlier tiles' totals.
 
-    Both steps are dots with 0/1 matrices at float32 ("highest") precision: Triton computes
-    them as sequential FMAs over k, and ``fma(w, 1, acc) = acc + w``, ``fma(w, 0, acc) = acc``
-    exactly, so each output is the intended left-to-right sum, bit for bit.
+    Written with explicit additions on ``[B, K/tile, tile]`` views, one column of every tile at
+    a time (a masked sum picks the column: exact, the other terms are +0), so every platform
+    adds the same numbers in the same order. An earlier version used float32 dots with 0/1
+    matrices; on the H100 Triton's dots matched XLA's cumsum on only 84 % of elements
+    (experiments/results/bench/pallas_ops_probe_h100_dots.json): they do not add in k order.
     """
-    k = w.shape[-1]
-    row = jax.lax.broadcasted_iota(jnp.int32, (k, k), 0)
-    col = jax.lax.broadcasted_iota(jnp.int32, (k, k), 1)
-    same_tile = (row // tile) == (col // tile)
-    tri = jnp.where((row <= col) & same_tile, 1.0, 0.0).astype(w.dtype)
-    hi = jax.lax.Precision.HIGHEST
-    inner = jnp.dot(w, tri, precision=hi, preferred_element_type=w.dtype)
-    if tile >= k:
-        return inner
-    last = (row % tile) == tile - 1  # rows holding a tile's total
-    sel = jnp.where(last & ((row // tile) < (col // tile)), 1.0, 0.0).astype(w.dtype)
-    return inner + jnp.dot(inner, sel, precision=hi, preferred_element_type=w.dtype)
+    b, k = w.shape
+    tile = min(tile, k)
+    num_tiles = k // tile
+    w3 = w.reshape(b, num_tiles, tile)
+    lane = jax.lax.broadcasted_iota(jnp.int32, (b, num_tiles, tile), 2)
+    acc = jnp.zeros((b, num_tiles), w.dtype)
+    inner = jnp.zeros_like(w3)
+    for i in range(tile):
+        acc = acc + jnp.sum(jnp.where(lane == i, w3, 0.0), axis=2)
+        inner = jnp.where(lane == i, acc[:, :, None], inner)
+    if num_tiles == 1:
+        return inner.reshape(b, k)
+    tile_id = jax.lax.broadcasted_iota(jnp.int32, (b, num_tiles), 1)
+    carry = jnp.zeros((b,), w.dtype)
+    before = jnp.zeros((b, num_tiles), w.dtype)  # exclusive prefix of the tile totals
+    for c in range(1, num_tiles):
+        carry = carry + jnp.sum(jnp.where(tile_id == c - 1, acc, 0.0), axis=1)
+        before = jnp.where(tile_id == c, carry[:, None], before)
+    return (inner + before[:, :, None]).reshape(b, k)
 
 
 def _segments(config: sim.RunConfig, block: int) -> np.ndarray:
@@ -136,7 +144,7 @@ def make_pallas_run(
     seeds_per_program: int = DEFAULT_SEEDS_PER_PROGRAM,
     num_warps: int = DEFAULT_NUM_WARPS,
     block: int = fast_softmax.DEFAULT_BLOCK,
-    rebase: str = "auto",
+    rebase: str = "tiled16",
     interpret: bool = False,
 ) -> Callable[[Array, sim.RunParams], sim.RunOutput]:
     """Builds ``fn(keys [S], params) -> RunOutput`` (each field with a leading S), to be jitted.
@@ -148,11 +156,10 @@ def make_pallas_run(
       num_warps: Triton warps per program (GPU only).
       block: rounds between rebases (the engine's ``DEFAULT_BLOCK``: change it only to
         compare with an engine built with the same block), a power of two.
-      rebase: the order of the prefix sums at each rebase: ``"scan"`` (``jnp.cumsum``:
-        XLA's in the interpreter, Triton's scan on a GPU), ``"sequential"`` (left to right),
-        ``"tiled16"`` (XLA:GPU's order for the engine's cumsum, see
-        :func:`_tiled_prefix_sums`); ``"auto"``: ``"scan"`` when interpreted, else
-        ``"tiled16"``.
+      rebase: the order of the prefix sums at each rebase: ``"tiled16"`` (XLA's order for the
+        engine's cumsum, :func:`_tiled_prefix_sums`), ``"sequential"`` (left to right) or
+        ``"scan"`` (``jnp.cumsum``: XLA's in the interpreter, Triton's scan on a GPU, whose
+        order differs from XLA's); the last two are kept for measurements.
       interpret: run the kernel in Pallas' interpreter (CPU, tests).
 
     Returns:
@@ -184,26 +191,13 @@ def make_pallas_run(
     num_g = segs.shape[0]
     amin = fast_softmax.min_alpha(config.dtype)
     estimator = config.estimator
-    if rebase == "auto":  # XLA's own order where Triton dots can express it
-        rebase = "tiled16" if interpret or (num_arms >= 16 and big_b >= 16) else "scan"
     rebase_mode = rebase
-    tile = 16 if rebase_mode == "tiled16" else num_arms
-    if rebase_mode in ("sequential", "tiled16") and not interpret and (
-            num_arms < 16 or big_b < 16):
-        raise ValueError(f"rebase={rebase_mode!r} on a GPU needs num_arms >= 16 and "
-                         f"seeds_per_program >= 16 (Triton dots), got {num_arms}, {big_b}")
+    tile = 16 if rebase_mode == "tiled16" else num_arms  # "sequential": one tile
 
     def div(x, y):
-        # Triton lowers float32 ``/`` to div.full.f32 (approximate); XLA divides IEEE-exactly.
-        if interpret:
-            return x / y
-        from jax.experimental.pallas import triton as pltriton
-
-        x, y = jnp.broadcast_arrays(x, y)
-        [q] = pltriton.elementwise_inline_asm(
-            "div.rn.f32 $0, $1, $2;", args=[x, y], constraints="=f,f,f", pack=1,
-            result_shape_dtypes=[jax.ShapeDtypeStruct(x.shape, dtype)])
-        return q
+        # Plain ``/``: on the H100 Triton's float32 division equals XLA's on 100 % of the
+        # probe's add-half quotients, IEEE div.rn.f32 on 71 % only (pallas_ops_probe_h100.json).
+        return x / y
 
     def rhat(n, s, r_true, pin):
         if estimator == "addhalf":  # the engine's tabular_rhat, with an IEEE division

@@ -268,19 +268,53 @@ def _pool(threads: int) -> concurrent.futures.ThreadPoolExecutor:
         return _POOLS[threads]
 
 
+@jax.jit
+def _pose_uniforms(seeds: jax.Array) -> jax.Array:
+    """``scene.resting_pose``'s five uniforms of every seed [P] -> [P, 5]: the same draws
+    as ``uniform(key(seed), (5,))`` one seed at a time (threefry bits and exact float ops;
+    tests/grasp/test_context_threads.py), in one call instead of one per pose."""
+    return jax.vmap(lambda s: jax.random.uniform(jax.random.key(s), (5,)))(seeds)
+
+
 def _resting_poses(model: mujoco.MjModel, seeds: np.ndarray, config: ContextConfig
                    ) -> np.ndarray:
     """``scene.resting_pose`` of every seed [P] -> poses [P, 7], in threads (same values:
     each pose has its own MjData and seed; the model is only read)."""
+    seeds = np.asarray(seeds)
+    u = np.asarray(_pose_uniforms(jnp.asarray(seeds, jnp.int32)), np.float64)
 
-    def one(seed):
-        return scene_lib.resting_pose(
-            model, int(seed), config.scene.xy_jitter, config.scene.settle_steps)
+    def one(i):
+        return scene_lib.resting_pose_from_uniforms(
+            model, u[i], config.scene.xy_jitter, config.scene.settle_steps)
 
     threads = min(len(seeds), context_threads())
     if threads <= 1 or threading.current_thread().name.startswith("sern-context"):
-        return np.stack([one(s) for s in seeds])
-    return np.stack(list(_pool(threads).map(one, seeds)))  # in order; first error raised
+        return np.stack([one(i) for i in range(len(seeds))])
+    return np.stack(list(_pool(threads).map(one, range(len(seeds)))))  # in order
+
+
+_CAMERA_MODELS: dict = {}
+_CAMERA_MODELS_LOCK = threading.Lock()
+
+
+def _camera_model(model: mujoco.MjModel):
+    """``depth.camera_model(model)``, kept per model contents (the MJB bytes' digest, so an
+    edited model is another entry): ``mjx.put_model`` costs ~15 ms of Python per call, and
+    the online runner renders every (object, seed) batch of every round in one scene."""
+    import hashlib
+
+    buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buf)
+    digest = hashlib.blake2b(buf.tobytes(), digest_size=16).digest()
+    with _CAMERA_MODELS_LOCK:
+        hit = _CAMERA_MODELS.get(digest)
+    if hit is None:
+        hit = depth_lib.camera_model(model)
+        with _CAMERA_MODELS_LOCK:
+            if len(_CAMERA_MODELS) >= 64:
+                _CAMERA_MODELS.pop(next(iter(_CAMERA_MODELS)))
+            _CAMERA_MODELS[digest] = hit
+    return hit
 
 
 def _contexts(
@@ -300,7 +334,7 @@ def _contexts(
             scene_lib.scene_ids(model).object_qpos, keys_noise if config.noise else None)
         cands = _sampler(config.candidates)(keys_cand, depth, params)
     else:
-        m = depth_lib.camera_model(model)
+        m = _camera_model(model)
         fn = _pipeline(config.camera, config.candidates, config.noise)
         depth, cands = fn(m, _geom_poses(model, poses), params, keys_noise, keys_cand)
     to_np = functools.partial(jax.tree.map, np.asarray)

@@ -501,11 +501,17 @@ def _run_trials(simulators, grasps, poses, noise_keys, n_per_key, counts=None):
     not depend on the others in its batch, so this gives the same outcomes bit for bit as
     simulating every copy (tests/grasp/test_online.py checks both ways). ``counts``, a
     dict, accumulates ``requested`` and ``simulated`` trials.
+
+    The objects' trials are handed to their simulators from threads of their own (native
+    simulators share one pool of trial workers, so every object's trials keep the cores
+    busy together); each object's outcomes and counts are the serial ones.
     """
     num_o, num_s, num_q, num_n = grasps.shape[:4]
     out = np.zeros((num_o, num_s, num_q, num_n), bool)
     s_i, _, n_i = np.indices((num_s, num_q, num_n)).reshape(3, -1)
-    for o, simulator in enumerate(simulators):
+
+    def one(o):
+        simulator = simulators[o]
         noise = _seed_noise(simulator, noise_keys[o], n_per_key)  # [S, N, ...]
         flat = np.ascontiguousarray(grasps[o].reshape(-1, 4), np.float64)
         key = np.concatenate([s_i[:, None], n_i[:, None], flat.view(np.int64)], axis=1)
@@ -515,10 +521,23 @@ def _run_trials(simulators, grasps, poses, noise_keys, n_per_key, counts=None):
             flat[first], sim_lib.TrialNoise(*(a[us, un] for a in noise)),
             object_pose=poses[o][us, un])
         out[o] = res.success[inverse.reshape(-1)].reshape(num_s, num_q, num_n)
-        if counts is not None:
-            counts["requested"] = counts.get("requested", 0) + len(flat)
-            counts["simulated"] = counts.get("simulated", 0) + len(first)
+        return len(flat), len(first)
+
+    if num_o > 1:
+        done = list(_object_pool().map(one, range(num_o)))
+    else:
+        done = [one(o) for o in range(num_o)]
+    if counts is not None:
+        for requested, simulated in done:
+            counts["requested"] = counts.get("requested", 0) + requested
+            counts["simulated"] = counts.get("simulated", 0) + simulated
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def _object_pool() -> concurrent.futures.ThreadPoolExecutor:
+    """Threads that hand each object's trials to its simulator (they mostly wait)."""
+    return concurrent.futures.ThreadPoolExecutor(16, thread_name_prefix="sern-object-trials")
 
 
 def _check_actions(action, valid, names, specs, round_index):

@@ -61,6 +61,7 @@ __all__ = [
     "scene_xml",
     "scene_ids",
     "resting_pose",
+    "resting_pose_from_uniforms",
     "build_scene",
     "set_object_pose",
     "object_pose",
@@ -342,8 +343,24 @@ def resting_pose(
     Raises:
       ValueError: the object did not come to rest or left the table.
     """
-    ids = scene_ids(model)
     u = np.asarray(jax.random.uniform(jax.random.key(seed), (5,)), dtype=np.float64)
+    return resting_pose_from_uniforms(model, u, xy_jitter, max_steps)
+
+
+def resting_pose_from_uniforms(
+    model: mujoco.MjModel, u: np.ndarray, xy_jitter: float = 0.02, max_steps: int = 600
+) -> np.ndarray:
+    """:func:`resting_pose` from its five uniforms ``u`` [5] (orientation, x/y offset):
+    ``resting_pose(model, seed)`` is this with ``u = uniform(key(seed), (5,))``, so a batch
+    of seeds can draw its uniforms in one call (``context``).
+
+    The drop is stepped by ``mujoco.rollout`` in blocks (MuJoCo's C loop, GIL released, so
+    threads settle poses on every core) and stops at the same step as the one-step-per-
+    iteration loop it replaces, with the same state bit for bit (the same ``mj_step`` on
+    the same state, controls and warm start; tests/grasp/test_context_threads.py). A block
+    that ``rollout`` stopped early (a MuJoCo warning) is redone by that loop.
+    """
+    ids = scene_ids(model)
     data = mujoco.MjData(model)
     mujoco.mj_resetData(model, data)
     _park_gripper(model, data, ids)
@@ -354,23 +371,73 @@ def resting_pose(
     mujoco.mj_kinematics(model, data)
     lowest = _lowest_point(model, data, ids)
     data.qpos[a + 2] = -lowest + 0.005
-    still = 0
-    for _ in range(max_steps):
-        mujoco.mj_step(model, data)
-        v = data.qvel[ids.object_dof : ids.object_dof + 6]
-        still = (
-            still + 1
-            if (np.abs(v[:3]).max() < 1e-3 and np.abs(v[3:]).max() < 1e-2)
-            else 0
-        )
-        if still * model.opt.timestep >= 0.1:
-            break
-    pose = data.qpos[a : a + 7].copy()
+    pose = _settle_in_blocks(model, data, ids, max_steps)
+    if pose is None:
+        pose = _settle_step_by_step(model, data, ids, max_steps)
     if not np.all(np.isfinite(pose)) or pose[2] < -0.01 or pose[2] > 0.2:
         raise ValueError(f"object did not settle on the table (pose {pose})")
     pose[:2] = (u[3:5] * 2 - 1) * xy_jitter
     pose[3:] /= np.linalg.norm(pose[3:])
     return pose
+
+
+def _calm(v: np.ndarray):
+    """The object's twist [..., 6] is below 1 mm/s and 0.01 rad/s."""
+    return (np.abs(v[..., :3]).max(-1) < 1e-3) & (np.abs(v[..., 3:]).max(-1) < 1e-2)
+
+
+def _settle_step_by_step(model, data, ids: SceneIds, max_steps: int) -> np.ndarray:
+    """The settling loop, one ``mj_step`` per iteration (modifies ``data``)."""
+    a = ids.object_qpos
+    still = 0
+    for _ in range(max_steps):
+        mujoco.mj_step(model, data)
+        v = data.qvel[ids.object_dof : ids.object_dof + 6]
+        still = still + 1 if _calm(v) else 0
+        if still * model.opt.timestep >= 0.1:
+            break
+    return data.qpos[a : a + 7].copy()
+
+
+SETTLE_BLOCK = 128  # steps per rollout block while settling (most drops rest in < 128)
+
+
+def _settle_in_blocks(model, data, ids: SceneIds, max_steps: int,
+                      block: int | None = None) -> np.ndarray | None:
+    """:func:`_settle_step_by_step` by ``mujoco.rollout`` blocks from ``data``'s state
+    (``data`` is not modified); None when a block stopped early (MuJoCo warning)."""
+    from mujoco import rollout as mj_rollout
+
+    block = block or SETTLE_BLOCK
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state, spec)
+    ctrl = data.ctrl.copy()[None, None]  # [1, 1, nu]: held every step
+    warm = data.qacc_warmstart.copy()[None]
+    work = mujoco.MjData(model)
+    roll = mj_rollout.Rollout(nthread=0)
+    a, dof, nq = ids.object_qpos, ids.object_dof, model.nq
+    dt = model.opt.timestep
+    still, done = 0, 0
+    states = None
+    while done < max_steps:
+        n = min(block, max_steps - done)
+        states, _ = roll.rollout(model, work, state[None], ctrl, nstep=n,
+                                 initial_warmstart=warm)
+        states = states[0]
+        # rollout repeats the last state after a warning: time stops advancing
+        ran = np.abs(np.diff(np.concatenate([state[:1], states[:, 0]])) - dt) < 0.5 * dt
+        if not ran.all():
+            return None
+        calm = _calm(states[:, 1 + nq + dof : 1 + nq + dof + 6])
+        for i, c in enumerate(calm.tolist()):
+            still = still + 1 if c else 0
+            if still * dt >= 0.1:
+                return states[i, 1 + a : 1 + a + 7].copy()
+        done += n
+        state = states[-1].copy()
+        warm = work.qacc_warmstart.copy()[None]
+    return states[-1, 1 + a : 1 + a + 7].copy()
 
 
 _GEOM_NAMES = {

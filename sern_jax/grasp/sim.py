@@ -49,11 +49,13 @@ Every :class:`TrialResult` / :class:`SuccessEstimate` records its ``backend``.
 
 from __future__ import annotations
 
+import concurrent.futures
 import copy
 import dataclasses
 import functools
 import math
 import os
+import threading
 from typing import NamedTuple
 
 import jax
@@ -396,15 +398,26 @@ def _half_open(model: mujoco.MjModel, ids: scene_lib.SceneIds) -> float:
 
 
 class _NativeRunner:
-    """mujoco.rollout over a cached pool of model copies (one per trial slot)."""
+    """``mujoco.rollout`` in tasks of a few trials each, spread over a thread pool that every
+    native simulator of the process shares (:func:`_trial_pool`).
+
+    Each task rolls out its trials on the calling worker thread (``nthread=0``: MuJoCo
+    steps with the GIL released) with that thread's own ``MjData`` and model copies (one
+    per trial slot, holding the trial's friction and mass), so simulators of several
+    objects, called from several threads, keep every core busy with no barrier between
+    chunks or objects. A trial's outcome depends only on its model, initial state and
+    controls (``rollout`` resets the data for each trajectory), so the outcomes are the
+    same bit for bit whatever the task size, the thread count or the order
+    (tests/grasp/test_runner.py, tests/grasp/test_context_threads.py)."""
 
     def __init__(self, model, config, num_threads, chunk):
         self.model, self.config, self.chunk = model, config, chunk
+        self.threads = num_threads
         self.ids = scene_lib.scene_ids(model)
-        self.models = [copy.copy(model) for _ in range(chunk)]
-        self.datas = [mujoco.MjData(model) for _ in range(num_threads)]
         self.half_open = _half_open(model, self.ids)
-        self.nstate = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        self.nstate = mujoco.mj_stateSize(
+            model, mujoco.mjtState.mjSTATE_FULLPHYSICS
+        )
         self.base_mass = float(model.body_mass[self.ids.object_body])
         self.base_inertia = model.body_inertia[self.ids.object_body].copy()
         data = scene_lib.initial_data(model)
@@ -412,6 +425,50 @@ class _NativeRunner:
         mujoco.mj_getState(
             model, data, self.state0, mujoco.mjtState.mjSTATE_FULLPHYSICS
         )
+        self._local = threading.local()  # per worker thread: MjData, model copies
+
+    def _task_size(self, n: int) -> int:
+        """Trials per task: about 8 tasks per thread (load balance), at most 32 and at
+        most ``chunk`` (memory: task x steps x state doubles per thread)."""
+        return max(1, min(self.chunk, _MAX_TASK, -(-n // (8 * self.threads))))
+
+    def _workspace(self, size: int):
+        """This thread's (rollout, data, model copies), at least ``size`` copies."""
+        local = self._local
+        if not hasattr(local, "data"):
+            local.rollout = mj_rollout.Rollout(nthread=0)
+            local.data = mujoco.MjData(self.model)
+            local.models = []
+        while len(local.models) < size:
+            local.models.append(copy.copy(self.model))
+        return local.rollout, local.data, local.models[:size]
+
+    def _task(self, lo, hi, state0, ctrl, friction, mass_scale):
+        """Trials [lo, hi): (nan, rise before the nan rule, gap) for each."""
+        ids, q = self.ids, 1
+        rollout, data, models = self._workspace(hi - lo)
+        for m, f, s in zip(models, friction[lo:hi], mass_scale[lo:hi]):
+            m.geom_friction[list(ids.object_geoms), 0] = f
+            m.body_mass[ids.object_body] = self.base_mass * s
+            m.body_inertia[ids.object_body] = self.base_inertia * s
+        state, _ = rollout.rollout(models, data, state0[lo:hi], ctrl[lo:hi])
+        nq, nv = self.model.nq, self.model.nv
+        qpos_t = state[:, :, q : q + nq]
+        qvel_t = state[:, :, q + nq : q + nq + nv]
+        # mujoco.rollout stops stepping a trial at a MuJoCo warning (e.g. bad
+        # qacc) and repeats its last state: a final time short of the schedule
+        # means the trial diverged, even if that state is finite.
+        expected_t = self.state0[0] + self.config.num_steps * self.model.opt.timestep
+        finite = (
+            np.isfinite(state).all(axis=(1, 2))
+            & (np.abs(qpos_t) < QPOS_LIMIT).all(axis=(1, 2))
+            & (np.abs(qvel_t) < QVEL_LIMIT).all(axis=(1, 2))
+            & (np.abs(state[:, -1, 0] - expected_t) < 0.5 * self.model.opt.timestep)
+        )
+        last = state[:, -1]
+        rise = last[:, q + ids.object_qpos + 2] - state0[lo:hi, q + ids.object_qpos + 2]
+        gap = last[:, q + ids.finger_qpos[0]] + last[:, q + ids.finger_qpos[1]]
+        return ~finite, rise, gap
 
     def __call__(self, grasps, noise, object_pose):
         ids, n = self.ids, len(grasps)
@@ -427,45 +484,34 @@ class _NativeRunner:
         state0[:, q + np.array(ids.palm_qpos + ids.finger_qpos)] = palm0
         if object_pose is not None:
             state0[:, q + ids.object_qpos : q + ids.object_qpos + 7] = object_pose
-        success = np.zeros(n, bool)
-        nan = np.zeros(n, bool)
-        rise = np.zeros(n)
-        gap = np.zeros(n)
-        z0 = state0[:, q + ids.object_qpos + 2]
-        for lo in range(0, n, self.chunk):
-            hi = min(n, lo + self.chunk)
-            models = self.models[: hi - lo]
-            for m, f, s in zip(models, noise.friction[lo:hi], noise.mass_scale[lo:hi]):
-                m.geom_friction[list(ids.object_geoms), 0] = f
-                m.body_mass[ids.object_body] = self.base_mass * s
-                m.body_inertia[ids.object_body] = self.base_inertia * s
-            state, _ = mj_rollout.rollout(
-                models, self.datas, state0[lo:hi], ctrl[lo:hi], persistent_pool=True
-            )
-            nq, nv = self.model.nq, self.model.nv
-            qpos_t = state[:, :, q : q + nq]
-            qvel_t = state[:, :, q + nq : q + nq + nv]
-            # mujoco.rollout stops stepping a trial at a MuJoCo warning (e.g. bad
-            # qacc) and repeats its last state: a final time short of the schedule
-            # means the trial diverged, even if that state is finite.
-            expected_t = (
-                self.state0[0] + self.config.num_steps * self.model.opt.timestep
-            )
-            finite = (
-                np.isfinite(state).all(axis=(1, 2))
-                & (np.abs(qpos_t) < QPOS_LIMIT).all(axis=(1, 2))
-                & (np.abs(qvel_t) < QVEL_LIMIT).all(axis=(1, 2))
-                & (np.abs(state[:, -1, 0] - expected_t) < 0.5 * self.model.opt.timestep)
-            )
-            last = state[:, -1]
-            nan[lo:hi] = ~finite
-            rise[lo:hi] = last[:, q + ids.object_qpos + 2] - z0[lo:hi]
-            gap[lo:hi] = (
-                last[:, q + ids.finger_qpos[0]] + last[:, q + ids.finger_qpos[1]]
-            )
+        ctrl = np.ascontiguousarray(ctrl)
+        size = self._task_size(n)
+        bounds = [(lo, min(n, lo + size)) for lo in range(0, n, size)]
+        args = (state0, ctrl, noise.friction, noise.mass_scale)
+        if self.threads <= 1 or len(bounds) == 1:
+            parts = [self._task(lo, hi, *args) for lo, hi in bounds]
+        else:
+            pool = _trial_pool(self.threads)
+            parts = [f.result() for f in
+                     [pool.submit(self._task, lo, hi, *args) for lo, hi in bounds]]
+        nan, rise, gap = (np.concatenate(x) for x in zip(*parts))
         rise = np.where(nan, np.nan, rise)
         success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
         return TrialResult(success, nan, rise, gap, "native")
+
+
+_MAX_TASK = 32  # most trials per native task
+_TRIAL_POOLS: dict[int, concurrent.futures.ThreadPoolExecutor] = {}
+_TRIAL_POOLS_LOCK = threading.Lock()
+
+
+def _trial_pool(threads: int) -> concurrent.futures.ThreadPoolExecutor:
+    """The process's pool of ``threads`` native trial workers (shared by simulators)."""
+    with _TRIAL_POOLS_LOCK:
+        if threads not in _TRIAL_POOLS:
+            _TRIAL_POOLS[threads] = concurrent.futures.ThreadPoolExecutor(
+                threads, thread_name_prefix="sern-trials")
+        return _TRIAL_POOLS[threads]
 
 
 # ----------------------------------------------------------------------------- mjx

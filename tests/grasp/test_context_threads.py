@@ -33,3 +33,128 @@ def test_context_threads_follow_the_task_share(monkeypatch):
     monkeypatch.delenv("SERN_CONTEXT_THREADS", raising=False)
     monkeypatch.setenv("SERN_CPU_THREADS", "2")
     assert context.context_threads() == 2
+
+
+# --- issue 20 (strong setting on 16 cores): resting poses settled by rollout blocks, their
+# uniforms drawn in one call, native trials in a shared pool of workers, the camera model
+# kept per scene. Each is checked against the serial computation it replaces, bit for bit.
+
+
+def _step_by_step_pose(model, seed, max_steps=600):
+    """The resting pose as the one-mj_step-per-iteration loop computes it."""
+    from sern_jax.grasp import scene
+
+    with_loop = scene._settle_in_blocks
+    try:
+        scene._settle_in_blocks = lambda *a, **k: None  # force the loop
+        return scene.resting_pose(model, seed, max_steps=max_steps)
+    finally:
+        scene._settle_in_blocks = with_loop
+
+
+def test_rollout_settling_equals_the_step_loop_bit_for_bit(monkeypatch):
+    from sern_jax.grasp import scene
+
+    specs = [objects.make_object("tless_part_a"), objects.make_object("pipe_tee_steel"),
+             objects.sample_population(3, 2)[1]]
+    seen = set()
+    for spec in specs:
+        model = context.scene_model(spec)
+        for seed in (3, 104746, 2**31 - 5):
+            loop = _step_by_step_pose(model, seed)
+            for block in (128, 7):  # 7: many continuations from a block's last state
+                monkeypatch.setattr(scene, "SETTLE_BLOCK", block)
+                got = scene.resting_pose(model, seed)
+                assert got.tobytes() == loop.tobytes(), (spec.name, seed, block)
+            seen.add(loop.tobytes())
+        for max_steps in (1, 30):  # stopped by max_steps, not by rest
+            try:
+                want = _step_by_step_pose(model, 5, max_steps)
+            except ValueError as e:
+                want = str(e)
+            try:
+                got = scene.resting_pose(model, 5, max_steps=max_steps)
+            except ValueError as e:
+                got = str(e)
+            assert (got == want) if isinstance(want, str) else got.tobytes() == want.tobytes()
+    assert len(seen) == 9  # nine different poses: the comparison has teeth
+
+
+def test_settling_redoes_a_block_that_rollout_stopped_early(monkeypatch):
+    """A block whose time stopped advancing (rollout's answer to a MuJoCo warning) is
+    refused, and the pose comes from the step loop."""
+    from mujoco import rollout as mj_rollout
+
+    from sern_jax.grasp import scene
+
+    model = context.scene_model(objects.make_object("tless_part_a"))
+    want = _step_by_step_pose(model, 9)
+    real = mj_rollout.Rollout.rollout
+
+    def stalls(self, *args, **kwargs):
+        state, sensor = real(self, *args, **kwargs)
+        state[:, 5:] = state[:, 4:5]  # repeats its state from step 5 on, as after a warning
+        return state, sensor
+
+    monkeypatch.setattr(mj_rollout.Rollout, "rollout", stalls)
+    data = scene.initial_data(model)
+    assert scene._settle_in_blocks(model, data, scene.scene_ids(model), 600) is None
+    assert scene.resting_pose(model, 9).tobytes() == want.tobytes()
+
+
+def test_batched_pose_uniforms_equal_one_seed_at_a_time():
+    rng = np.random.default_rng(0)
+    seeds = np.concatenate([rng.integers(0, 2**31, 200), [0, 1, 2**31 - 1]])
+    batch = np.asarray(context._pose_uniforms(jax.numpy.asarray(seeds, jax.numpy.int32)),
+                       np.float64)
+    for s, row in zip(seeds, batch):
+        one = np.asarray(jax.random.uniform(jax.random.key(int(s)), (5,)), np.float64)
+        assert one.tobytes() == row.tobytes(), s
+    assert len({r.tobytes() for r in batch}) == len(seeds)
+
+
+def test_pooled_native_trials_equal_one_thread_bit_for_bit():
+    """Trials split into tasks over the shared worker pool (any task size, any thread
+    count, objects from several threads at once) give the outcomes of one thread."""
+    import concurrent.futures
+
+    from sern_jax.grasp import sim
+
+    specs = [objects.make_object("tless_part_a"), objects.make_object("pipe_tee_steel")]
+    cases = []
+    for i, spec in enumerate(specs):
+        ctx = context.make_contexts(jax.random.key(20 + i), spec, 3)
+        pi, ki = np.nonzero(np.asarray(ctx.candidates.valid))
+        pi, ki = pi[:40], ki[:40]
+        grasps = np.asarray(ctx.candidates.grasps, np.float64)[pi, ki]
+        noise = sim.sample_noise(jax.random.key(7 + i), len(pi))
+        cases.append((ctx.model, grasps, noise, np.asarray(ctx.poses)[pi]))
+
+    def fields(r):
+        return [np.asarray(getattr(r, f)).tobytes() for f in ("success", "nan", "rise", "gap")]
+
+    want = [fields(sim.GraspSimulator(m, num_threads=1).run_trials(g, n, object_pose=p))
+            for m, g, n, p in cases]
+    for threads, chunk in ((3, 256), (2, 5), (4, 1)):
+        sims = [sim.GraspSimulator(m, num_threads=threads, chunk=chunk) for m, *_ in cases]
+        with concurrent.futures.ThreadPoolExecutor(2) as ex:
+            got = list(ex.map(lambda i: fields(sims[i].run_trials(
+                cases[i][1], cases[i][2], object_pose=cases[i][3])), range(2)))
+        assert got == want, (threads, chunk)
+        assert threads in sim._TRIAL_POOLS
+    outcomes = [np.frombuffer(w[0], bool) for w in want]
+    assert all(0 < o.mean() < 1 for o in outcomes)  # both outcomes occur: teeth
+
+
+def test_camera_model_is_kept_per_scene_contents():
+    from sern_jax.grasp import depth
+
+    model = context.scene_model(objects.make_object("tless_part_a"))
+    first = context._camera_model(model)
+    assert context._camera_model(model) is first
+    assert context._camera_model(context.copy_model(model)) is first  # same contents
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(depth.camera_model(model))):
+        assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+    edited = context.copy_model(model)
+    edited.geom_size[edited.ngeom - 1, 0] *= 1.5
+    assert context._camera_model(edited) is not first

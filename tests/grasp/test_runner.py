@@ -767,3 +767,24 @@ def test_fingerprint_separates_the_ensemble_layouts_and_keeps_old_whole_network_
     del d["hyper"], d["regret_grasps"]
     assert plain.fingerprint() == hashlib.sha256(
         json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def test_objects_trials_in_threads_equal_one_object_at_a_time():
+    """_run_trials hands each object's trials to its simulator from a thread of its own
+    (issue 20): outcomes and counts equal running the objects one after another."""
+    rng = np.random.default_rng(3)
+    num_o, num_s, num_q, num_n = 3, 2, 2, 5
+    grasps = rng.normal(size=(num_o, num_s, num_q, num_n, 4))
+    grasps[:, :, 1, ::2] = grasps[:, :, 0, ::2]  # shared choices: deduplicated per object
+    poses = rng.normal(size=(num_o, num_s, num_n, 7))
+    keys = [[jax.random.key(10 * o + s) for s in range(num_s)] for o in range(num_o)]
+    sims, counts = [_HashSimulator() for _ in range(num_o)], {}
+    got = runner._run_trials(sims, grasps, poses, keys, num_n, counts)
+    want, want_counts = np.zeros_like(got), {}
+    for o in range(num_o):
+        want[o] = runner._run_trials([_HashSimulator()], grasps[o:o + 1], poses[o:o + 1],
+                                     keys[o:o + 1], num_n, want_counts)[0]
+    np.testing.assert_array_equal(got, want)
+    assert counts == want_counts == {"requested": num_o * num_s * num_q * num_n,
+                                     "simulated": num_o * num_s * (num_n + num_n // 2)}
+    assert 0 < got.mean() < 1 and not (got[0] == got[1]).all()

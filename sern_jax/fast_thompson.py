@@ -18,17 +18,27 @@ Why it is faster than the general runner (0.039M seed-rounds/s at K = 64 on 2 co
   only the pulled lane's draws ahead are dropped, and that one lane retries at once on
   ``[C]`` vectors (``PULLED_TRIES``). Every lane still takes the first accepted try of its
   own sequence for each round, so the draws are those of :func:`sern_jax.prng.sample_beta`.
-  At K = 64, T = 2,000 this ran 1.58 loop steps per round at one try per lane and step
-  (the slowest seed of each 256-seed chunk), against 1.46 steps of two tries before: 1.6
-  tries per lane-round instead of 2.9. (Compacting the rejected lanes instead, by gathers or
-  one-hot packing, measured 10–50× slower on XLA:CPU.) The wall-clock gain is smaller than
-  the tries saved: the step's other passes over ``[C, K]`` arrays cost about as much as a
-  try (see the README's Thompson paragraph for what was measured);
+  A lane holds its draws for rounds t, t + 1, … in ``LOOKAHEAD`` slot arrays (−1: none
+  yet), shifted by one when its seed plays. At K = 64, T = 2,000 this ran 1.58 loop steps
+  per round at lookahead 2 and 1.41 at 3 (the slowest seed of each 256-seed chunk; a
+  lane's own rate is bounded by BB's acceptance, ~1.2 tries per round), against 1.46 steps
+  of two tries before lanes drew ahead. (Compacting the rejected lanes instead, by gathers
+  or one-hot packing, measured 10–50× slower on XLA:CPU.)
+* one pass per try (2026-11-24, issue 20): a try is :func:`sern_jax.prng.beta_try_packed`,
+  one held value per lane (the draw, or ``REJECTED``). Given a try's two outputs, XLA:CPU
+  had materialised each of its logs, exps, divisions and shared values as an array of its
+  own and recomputed the threefry hash in several of them (74 fusions per loop step before,
+  48 with the shared-log arithmetic alone, ~15 of them the try); now the try is one loop
+  and the step 28 fusions (lookahead 2). Measured on one core of
+  the 2-core machine (``taskset -c 0``, 256 seeds, CPU time, paired with the previous
+  code in the same minutes at load 4–6): 17.2–17.3 ns per lane and step against 28–31 ns,
+  0.64M seed-rounds per CPU-second against 0.32–0.35M;
 * the runner is written over the seed axis (``[S, K]`` arrays), not ``vmap``-ed, so the
   compaction sees every seed's lanes; the argmax is a max and a min (XLA:CPU's variadic
-  argmax reduction does not vectorise), the pulled arm's mean and the count updates are
-  one-hot elementwise passes (no gathers or scatters), and the arm uniform, which a one-hot
-  policy does not use, is not drawn;
+  argmax reduction does not vectorise), and the same max says whether every lane holds its
+  draw; the pulled arm's mean, count and sum are gathered ([C] values), the count updates
+  are one-hot elementwise passes, and the arm uniform, which a one-hot policy does not
+  use, is not drawn;
 * the outputs the general runner derives from the one-hot policy are written directly: the
   Rao–Blackwellised regrets equal the realised ones, the compensator equals the counts, and
   π's minimum is 0 from round 1.
@@ -57,12 +67,12 @@ from sern_jax.types import Array
 __all__ = ["supports", "make_batched", "DEFAULT_CPU_CHUNK", "LOOKAHEAD", "PULLED_TRIES"]
 
 DEFAULT_CPU_CHUNK = 256  # seeds per lax.map step on CPU
-# Rounds a lane may draw ahead of its seed (a power of two; 1: none), and tries the pulled
-# lane runs at once for the next round (on [C] vectors, cheap beside a [C, K] try). Measured
-# K = 64, T = 2,000 on the shared 2-core machine, paired in one process (load 8-16, so only
-# the ordering is trusted): 2 / 2 ran 1.03-1.36x the previous two-tries-per-step loop; 4 and 8
-# need fewer steps (1.36, 1.33 per round) but each step costs more (D buffer passes).
-LOOKAHEAD = 2
+# Rounds a lane may draw ahead of its seed (1: none), and tries the pulled lane runs at once
+# for the next round (on [C] vectors, cheap beside a [C, K] try). K = 64, T = 2,000, one core
+# of the shared 2-core machine, CPU time per seed-round (load 4-6, two interleaved runs each):
+# lookahead 2: 0.57-0.66M/s (1.58 steps per round), 3: 0.64-0.65M/s (1.41), 4: 0.63M/s (1.36;
+# each slot is one more pass per step).
+LOOKAHEAD = 3
 PULLED_TRIES = 2
 
 
@@ -85,9 +95,8 @@ def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool
 
 class _Carry(NamedTuple):
     t: Array  # [C] int32 the next round each seed plays (0-based)
-    have: Array  # [C, K] int32 rounds t, t + 1, ... whose draw the lane holds (0..D)
-    tries: Array  # [C, K] uint32 tries the lane has spent on round t + have
-    buf: tuple  # D × [C, K] accepted draws; round r sits in slot r mod D
+    slots: tuple  # D × [C, K] the lane's draws for rounds t, t + 1, …; −1: none yet (a prefix)
+    tries: Array  # [C, K] uint32 tries the lane has spent on its first round without a draw
     counts: Array  # [C, K] int32 pulls
     sums: Array  # [C, K] float summed rewards
     regret: Array  # [C] Kahan sum of best − r_arm
@@ -124,8 +133,8 @@ def make_batched(
             f"fast_thompson supports policy='thompson' with one context and no diagnostics "
             f"(threefry PRNG, partitionable); got policy={config.policy!r}, "
             f"num_contexts={config.num_contexts}, diagnostics={config.diagnostics}")
-    if lookahead < 1 or lookahead & (lookahead - 1):
-        raise ValueError(f"lookahead must be a power of two >= 1, got {lookahead}")
+    if lookahead < 1:
+        raise ValueError(f"lookahead must be >= 1, got {lookahead}")
     if pulled_tries < 0:
         raise ValueError(f"pulled_tries must be >= 0, got {pulled_tries}")
     dtype = config.jnp_dtype
@@ -150,7 +159,7 @@ def make_batched(
         best = jnp.max(means, axis=-1)  # [C]
         iota = jnp.arange(num_arms, dtype=jnp.int32)[None, :]
         lane = jnp.arange(num_arms, dtype=jnp.uint32)[None, :]
-        slots = jnp.arange(depth, dtype=jnp.int32)
+        rows = jnp.arange(size)
 
         def reward_uniform(t):
             e1, e2 = prng.threefry2x32(kd_env[:, 0], kd_env[:, 1], jnp.uint32(0), t)
@@ -162,72 +171,60 @@ def make_batched(
             bits = (bits >> np.uint64(12)) | np.uint64(0x3FF0000000000000)
             return jax.lax.bitcast_convert_type(bits, jnp.float64) - jnp.float64(1.0)
 
-        def round_keys(t):
-            """Policy key words of rounds t, t + 1, …, t + D − 1: two [C, D] uint32."""
-            r = t.astype(jnp.uint32)[:, None] + slots.astype(jnp.uint32)[None, :]  # [C, D]
-            k1, k2 = prng.threefry2x32(kd_pol[:, 0:1], kd_pol[:, 1:2], jnp.uint32(0), r)
-            return prng.hold_bits(k1), prng.hold_bits(k2)  # hashed once, not once per lane
+        def round_key(t):
+            """Policy key words of round t: two [C] uint32."""
+            return prng.threefry2x32(kd_pol[:, 0], kd_pol[:, 1], jnp.uint32(0),
+                                     t.astype(jnp.uint32))
 
         def step(c: _Carry, end) -> _Carry:
             active = c.t < end  # [C]
-            p1, p2 = round_keys(c.t)  # [C, D]
+            ahead = [round_key(c.t + d) for d in range(depth)]  # rounds t … t + D − 1
+            have = sum((s >= 0.0).astype(jnp.int32) for s in c.slots)  # [C, K] 0..D
             # ---- one try per lane for round t + have (a lane holding D rounds idles)
-            k1, k2 = p1[:, :1], p2[:, :1]
+            k1, k2 = ahead[0][0][:, None], ahead[0][1][:, None]
             for d in range(1, depth):
-                k1 = jnp.where(c.have == d, p1[:, d:d + 1], k1)
-                k2 = jnp.where(c.have == d, p2[:, d:d + 1], k2)
+                k1 = jnp.where(have == d, ahead[d][0][:, None], k1)
+                k2 = jnp.where(have == d, ahead[d][1][:, None], k2)
             a = 1.0 + c.sums
             b = 1.0 + c.counts.astype(dtype) - c.sums
-            # materialised once: XLA:CPU would otherwise copy the integer-only threefry into
-            # every consumer's fusion (measured: 72 inlined hashes per step instead of 4)
-            cand, acc = jax.lax.optimization_barrier(
-                prng.beta_try(k1, k2, a, b, c.tries, lane))
-            room = c.have < depth
-            got = room & acc
-            slot = (c.t[:, None] + c.have) & (depth - 1)  # [C, K] slot of round t + have
-            buf = tuple(jnp.where(got & (slot == d), cand, c.buf[d]) for d in range(depth))
-            have = c.have + got.astype(jnp.int32)
-            tries = jnp.where(got, np.uint32(0), c.tries + room.astype(jnp.uint32))
-            # ---- play round t where every lane holds its draw
-            play = active & jnp.all(have >= 1, axis=-1)  # [C]
-            now = (c.t & (depth - 1))[:, None]  # [C, 1] slot of round t
-            theta = buf[0]
-            for d in range(1, depth):
-                theta = jnp.where(now == d, buf[d], theta)
-            top = jnp.max(theta, axis=-1, keepdims=True)
-            arm = jnp.min(jnp.where(theta == top, iota, num_arms), axis=-1)  # first argmax
+            # one held value per lane: XLA:CPU compiles the whole try into one loop
+            val = prng.beta_try_packed(k1, k2, a, b, c.tries, lane)
+            got = ~(val > 1.0)
+            room = have < depth
+            slots = [jnp.where((have == d) & got, val, c.slots[d]) for d in range(depth)]
+            tries = jnp.where(room, jnp.where(got, np.uint32(0), c.tries + np.uint32(1)),
+                              c.tries)
+            # ---- play round t where every lane holds its draw (one max tells both)
+            top = jnp.max(jnp.where(slots[0] >= 0.0, slots[0], 2.0), axis=-1)  # [C]
+            play = active & (top <= 1.0)
+            arm = jnp.min(jnp.where(slots[0] == top[:, None], iota, num_arms - 1),
+                          axis=-1)  # the first argmax
             hot = (iota == arm[:, None]) & play[:, None]  # [C, K]
-            r_arm = jnp.sum(jnp.where(hot, means, 0.0), axis=-1)
-            n_arm = jnp.sum(jnp.where(hot, c.counts, 0), axis=-1).astype(dtype)
-            s_arm = jnp.sum(jnp.where(hot, c.sums, 0.0), axis=-1)
-            # held: a [C] value read by [C, K] fusions (see prng.hold)
-            reward = prng.hold((reward_uniform(c.t.astype(jnp.uint32)) < r_arm).astype(dtype))
+            r_arm = means[rows, arm]
+            n_arm = c.counts[rows, arm].astype(dtype)
+            s_arm = c.sums[rows, arm]
+            reward = (reward_uniform(c.t.astype(jnp.uint32)) < r_arm).astype(dtype)
             regret, regret_err = sim.kahan_add(c.regret, c.regret_err, best - r_arm)
-            t_next = c.t + play.astype(jnp.int32)
-            have = jnp.where(play[:, None], have - 1, have)
-            # ---- the pulled lane's posterior changed: drop its draws ahead, and try it now
-            theta1 = jnp.zeros_like(r_arm)
-            ok1 = jnp.zeros(r_arm.shape, bool)
-            n_pull = np.uint32(0)
+            # ---- the pulled lane's posterior changed: its draws ahead are dropped, and it
+            # tries for round t + 1 at once on [C] vectors
+            fresh = jnp.full_like(r_arm, -1.0)
             if pulled_tries:
                 a1, b1 = 1.0 + s_arm + reward, 2.0 + n_arm - s_arm - reward
-                q1, q2 = (p1[:, 1], p2[:, 1]) if depth > 1 else prng.threefry2x32(
-                    kd_pol[:, 0], kd_pol[:, 1], jnp.uint32(0), t_next.astype(jnp.uint32))
+                q1, q2 = ahead[1] if depth > 1 else round_key(c.t + 1)
                 arm_u = arm.astype(jnp.uint32)
-                for j in range(pulled_tries):
-                    cand1, acc1 = jax.lax.optimization_barrier(
-                        prng.beta_try(q1, q2, a1, b1, jnp.full_like(arm_u, j), arm_u))
-                    theta1 = jnp.where(ok1, theta1, cand1)
-                    ok1 = ok1 | acc1
-                n_pull = np.uint32(pulled_tries)
-            put1 = hot & ok1[:, None]  # [C, K]
-            slot1 = (t_next & (depth - 1))[:, None]  # [C, 1]
-            buf = tuple(jnp.where(put1 & (slot1 == d), theta1[:, None], buf[d])
-                        for d in range(depth))
-            have = jnp.where(hot, ok1[:, None].astype(jnp.int32), have)
-            tries = jnp.where(hot, jnp.where(ok1, np.uint32(0), n_pull)[:, None], tries)
+                for j in range(pulled_tries - 1, -1, -1):  # the first accepted try wins
+                    cand = prng.beta_try_packed(q1, q2, a1, b1, jnp.full_like(arm_u, j), arm_u)
+                    fresh = jnp.where(cand > 1.0, fresh, cand)
+            fresh = fresh[:, None]
+            shifted = []
+            for d in range(depth):
+                nxt = jnp.full_like(slots[d], -1.0) if d + 1 == depth else slots[d + 1]
+                s = jnp.where(play[:, None], nxt, slots[d])
+                shifted.append(jnp.where(hot, fresh if d == 0 else -1.0, s))
+            tries = jnp.where(hot, jnp.where(fresh >= 0.0, np.uint32(0),
+                                             np.uint32(pulled_tries)), tries)
             return _Carry(
-                t=t_next, have=have, tries=tries, buf=buf,
+                t=c.t + play.astype(jnp.int32), slots=tuple(shifted), tries=tries,
                 counts=c.counts + hot.astype(jnp.int32),
                 sums=c.sums + jnp.where(hot, reward[:, None], 0.0),
                 regret=jnp.where(play, regret, c.regret),
@@ -240,9 +237,8 @@ def make_batched(
 
         zeros = jnp.zeros((size, num_arms), dtype)
         c0 = _Carry(t=jnp.zeros((size,), jnp.int32),
-                    have=jnp.zeros((size, num_arms), jnp.int32),
+                    slots=(jnp.full((size, num_arms), -1.0, dtype),) * depth,
                     tries=jnp.zeros((size, num_arms), jnp.uint32),
-                    buf=(zeros,) * depth,
                     counts=jnp.zeros((size, num_arms), jnp.int32), sums=zeros,
                     regret=jnp.zeros((size,), dtype), regret_err=jnp.zeros((size,), dtype),
                     steps=jnp.zeros((size,), jnp.int32))

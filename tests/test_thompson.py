@@ -22,9 +22,10 @@ def _draws(a, b, seed=0):
     return np.asarray(fn(keys), np.float64).ravel()
 
 
-# closed forms (a or b = 1) and Cheng's BB, symmetric, skewed and large
-PAIRS = [(1.0, 1.0), (1.0, 9.0), (6.0, 1.0), (2.0, 2.0), (2.0, 160.0), (35.0, 4.0),
-         (300.0, 700.0)]
+# closed forms (a or b = 1; with a large other parameter most draws take the expm1
+# polynomial), and Cheng's BB, symmetric, skewed and large
+PAIRS = [(1.0, 1.0), (1.0, 9.0), (6.0, 1.0), (1.0, 3000.0), (2000.0, 1.0), (2.0, 2.0),
+         (2.0, 160.0), (35.0, 4.0), (300.0, 700.0)]
 
 
 @pytest.mark.parametrize("a,b", PAIRS)
@@ -62,7 +63,7 @@ def test_fast_thompson_equals_the_general_runner():
     assert fast.counts[:, -1].sum(-1).tolist() == [300] * 40
 
 
-@pytest.mark.parametrize("lookahead,pulled_tries", [(1, 0), (4, 3)])
+@pytest.mark.parametrize("lookahead,pulled_tries", [(1, 0), (3, 1), (4, 3)])
 def test_fast_thompson_lookahead_keeps_the_draws(lookahead, pulled_tries):
     """Drawing ahead (any depth, any number of immediate tries for the pulled lane) changes
     only the loop, not the draws: the same arms as the general runner, seed by seed."""
@@ -74,7 +75,7 @@ def test_fast_thompson_lookahead_keeps_the_draws(lookahead, pulled_tries):
     # every round costs at least one loop step, and rejections cost a few more
     assert CFG.horizon <= int(np.max(steps)) < 4 * CFG.horizon
     with pytest.raises(ValueError, match="lookahead"):
-        fast_thompson.make_batched(CFG, lookahead=3)
+        fast_thompson.make_batched(CFG, lookahead=0)
 
 
 def test_hold_is_the_identity_on_every_uniform_and_key_word():
@@ -89,6 +90,27 @@ def test_hold_is_the_identity_on_every_uniform_and_key_word():
     words = np.concatenate([half, half << np.uint32(16), (half << np.uint32(16)) | half[::-1]])
     np.testing.assert_array_equal(np.asarray(jax.jit(prng.hold_bits)(jnp.asarray(words))),
                                   words)
+
+
+def test_packed_try_is_the_try_held_exactly():
+    """beta_try_packed is beta_try's draw where accepted and REJECTED elsewhere, bit for bit
+    (prng.hold is exact on every value a draw can take: all float32 from 2^-60 to 1, sampled,
+    and REJECTED), so the fast runner's held values are the general runner's draws."""
+    rng = np.random.default_rng(0)
+    bits = rng.integers(np.float32(2.0**-60).view(np.uint32), np.float32(1.0).view(np.uint32),
+                        2**22, dtype=np.uint32, endpoint=True)
+    x = np.concatenate([bits.view(np.float32), [1.0, prng.REJECTED]]).astype(np.float32)
+    np.testing.assert_array_equal(np.asarray(jax.jit(prng.hold)(jnp.asarray(x))), x)
+    a = jnp.asarray(rng.integers(1, 40, (64, 64)), jnp.float32)
+    b = jnp.asarray(rng.integers(1, 400, (64, 64)), jnp.float32)
+    lane = jnp.arange(64, dtype=jnp.uint32)[None, :]
+    tries = jnp.asarray(rng.integers(0, 3, (64, 64)), jnp.uint32)
+    k1, k2 = jnp.uint32(12345), jnp.uint32(678)
+    theta, acc = jax.jit(prng.beta_try)(k1, k2, a, b, tries, lane)
+    packed = jax.jit(prng.beta_try_packed)(k1, k2, a, b, tries, lane)
+    assert 0.7 < float(jnp.mean(acc)) < 1.0  # some rejections, or the test is hollow
+    np.testing.assert_array_equal(np.asarray(packed),
+                                  np.where(np.asarray(acc), np.asarray(theta), prng.REJECTED))
 
 
 def test_fast_thompson_refuses_what_it_does_not_reproduce():

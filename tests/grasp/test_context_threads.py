@@ -158,3 +158,22 @@ def test_camera_model_is_kept_per_scene_contents():
     edited = context.copy_model(model)
     edited.geom_size[edited.ngeom - 1, 0] *= 1.5
     assert context._camera_model(edited) is not first
+
+
+def test_seed_noise_in_one_call_equals_sample_noise_per_seed():
+    """The runner draws every seed's trial noise in one jitted call: the values of one
+    eager ``sim.sample_noise`` per seed key, bit for bit."""
+    from sern_jax.grasp import runner, sim
+
+    class _Sim:
+        config = sim.TrialConfig()
+
+    for num in (5, 128):
+        keys = [jax.random.fold_in(jax.random.key(num), s) for s in range(7)]
+        got = runner._seed_noise(_Sim(), keys, num)
+        for s, key in enumerate(keys):
+            want = sim.sample_noise(key, num, _Sim.config)
+            for f in range(3):
+                assert got[f].dtype == want[f].dtype == np.float64
+                assert got[f][s].tobytes() == want[f].tobytes(), (num, s, f)
+        assert len({got.friction[s].tobytes() for s in range(7)}) == 7

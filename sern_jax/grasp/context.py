@@ -64,6 +64,7 @@ __all__ = [
     "scene_model",
     "copy_model",
     "context_threads",
+    "lower_priority",
 ]
 
 POSE_STREAM = 0  # fold_in id: resting-pose seed
@@ -256,6 +257,24 @@ def context_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+BACKGROUND_NICE = 10  # niceness of the context threads (made ahead of need)
+
+
+def lower_priority() -> None:
+    """Lowers the calling thread's CPU priority to niceness ``BACKGROUND_NICE`` (Linux: a
+    thread's own niceness; elsewhere, or if refused, nothing happens). The threads that
+    make contexts ahead of need call it, so under full load the cores go first to the
+    threads the run waits on (the main thread's compiles and dispatch, the trial workers);
+    idle cores still make contexts. Scheduling only: results are the same."""
+    try:
+        tid = threading.get_native_id()
+        current = os.getpriority(os.PRIO_PROCESS, tid)
+        if current < BACKGROUND_NICE:
+            os.setpriority(os.PRIO_PROCESS, tid, BACKGROUND_NICE)
+    except (AttributeError, OSError):
+        pass
+
+
 _POOLS: dict[int, concurrent.futures.ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
 
@@ -264,7 +283,7 @@ def _pool(threads: int) -> concurrent.futures.ThreadPoolExecutor:
     with _POOLS_LOCK:
         if threads not in _POOLS:
             _POOLS[threads] = concurrent.futures.ThreadPoolExecutor(
-                threads, thread_name_prefix="sern-context")
+                threads, thread_name_prefix="sern-context", initializer=lower_priority)
         return _POOLS[threads]
 
 

@@ -682,22 +682,32 @@ def run(
     # settling and ray casting and JAX's sampler release the GIL; each batch has its own
     # MjData and keys, the models are only read), so the batches of a round use the cores
     # instead of one. The threads' name starts with "sern-context", so each batch settles its
-    # poses in its own thread (context._resting_poses) rather than in a nested pool.
+    # poses in its own thread (context._resting_poses) rather than in a nested pool. They
+    # run at a lower CPU priority (context.lower_priority): they are made ahead of need, and
+    # the main thread (compiles, the learners' dispatch) and the trial workers come first.
     batches = concurrent.futures.ThreadPoolExecutor(
         max(1, min(num_o * num_s, context_lib.context_threads())),
-        thread_name_prefix="sern-context-batch")
+        thread_name_prefix="sern-context-batch", initializer=context_lib.lower_priority)
 
-    def contexts_of(stream, r, num):
-        jobs = [[batches.submit(_contexts, _stream(keys_os[o][s], stream, r), specs[o], num,
+    def submit_contexts(stream, r, num):
+        return [[batches.submit(_contexts, _stream(keys_os[o][s], stream, r), specs[o], num,
                                 models[o], context_config) for s in range(num_s)]
                 for o in range(num_o)]
+
+    def gather(jobs):
         return _stack_contexts([[job.result() for job in row] for row in jobs])
 
-    # The fixed low-variance evaluation poses of each (object, seed).
-    lowvar = None
-    if config.eval_poses:
-        lowvar = contexts_of(LOWVAR_CONTEXT, 0, config.eval_poses)
-        lowvar = lowvar + (crops_fn(lowvar[1], lowvar[2]),)
+    # The fixed low-variance evaluation poses of each (object, seed): queued first, gathered
+    # when round 0's evaluation (or a resumed round's) needs them.
+    lowvar_jobs = (submit_contexts(LOWVAR_CONTEXT, 0, config.eval_poses)
+                   if config.eval_poses else None)
+    lowvar_made = []
+
+    def lowvar_contexts():
+        if not lowvar_made:
+            lv = gather(lowvar_jobs)
+            lowvar_made.append(lv + (crops_fn(lv[1], lv[2]),))
+        return lowvar_made[0]
 
     from tqdm.auto import tqdm
 
@@ -709,27 +719,24 @@ def run(
             st, crops.image, crops.depth, cands.valid, u)) for lrn, st in zip(chosen, states)],
             axis=2)  # [O, S, Q, N]
 
-    # Contexts (a CPU-bound Python loop: resting-pose drops, rendering, candidates) are
-    # made one step ahead on a background thread while the main thread runs trials (native
-    # MuJoCo threads) and the learners: a round's evaluation contexts and the next round's
-    # exploration contexts. They depend on their keys only, so results are unchanged; the
-    # simulators run on copies of the scene models and only read them.
-    def make_contexts(kind, r):
-        stream, num = {"explore": (EXPLORE_CONTEXT, num_e),
-                       "eval": (EVAL_CONTEXT, config.evaluate)}[kind]
-        return contexts_of(stream, r, num)  # poses [O, S, N, 7]
-
-    ahead = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    # Contexts (resting-pose drops, rendering, candidates) are made ahead of need in the
+    # batch threads while the main thread runs trials and the learners: a round's evaluation
+    # contexts and the next round's exploration contexts are queued (in that order) as soon
+    # as the round's exploration contexts are taken. They depend on their keys only, so
+    # results are unchanged; the simulators run on copies of the scene models and only read
+    # them.
     pending = {}
 
     def prefetch(kind, r):
         if r <= num_r and (kind, r) not in pending:
-            pending[(kind, r)] = ahead.submit(make_contexts, kind, r)
+            stream, num = {"explore": (EXPLORE_CONTEXT, num_e),
+                           "eval": (EVAL_CONTEXT, config.evaluate)}[kind]
+            pending[(kind, r)] = submit_contexts(stream, r, num)  # poses [O, S, N, 7]
 
     def contexts(kind, r):
         t = time.perf_counter()
         prefetch(kind, r)
-        out = pending.pop((kind, r)).result()
+        out = gather(pending.pop((kind, r)))
         timings["contexts"] += time.perf_counter() - t
         return out
 
@@ -745,8 +752,8 @@ def run(
                               config.evaluate, trial_counts)
         success &= action >= 0
         results.paper_eval[r] = success.mean(-1).transpose(0, 2, 1)
-        if lowvar is not None:
-            poses, depth, cands, crops = lowvar
+        if lowvar_jobs is not None:
+            poses, depth, cands, crops = lowvar_contexts()
             u0 = np.zeros(poses.shape[:3], np.float32)
             action = greedy_actions(states, crops, cands, u0)  # [O, S, Q, P]
             grasps = _gather(cands.grasps, action)  # [O, S, Q, P, 4]
@@ -763,15 +770,17 @@ def run(
         timings["evaluate"] += time.perf_counter() - t
 
     if start_round == 0:
-        # round 0's evaluation contexts first: queued behind round 1's exploration contexts
-        # (4x as many in the default setting) on the one prefetch thread, the evaluation
-        # waited for both; now round 1's are made while round 0's trials run
+        # round 0's evaluation contexts before round 1's exploration contexts (4x as many in
+        # the default setting): the evaluation waits for its own only
         prefetch("eval", 0)
         prefetch("explore", 1)
         evaluate(0, states)
         _save(ckpt, fingerprint, results, rewards, 1)
         start_round = 1
         bar.update(1)
+        if not progress:
+            log(f"round 0/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
+                + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
 
     def explore_contexts(r):
         out = contexts("explore", r)
@@ -857,7 +866,6 @@ def run(
             log(f"round {r}/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
                 + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
     bar.close()
-    ahead.shutdown(wait=False, cancel_futures=True)
     batches.shutdown(wait=False, cancel_futures=True)
     rows = table_rows(names, config.policies, results.paper_eval,
                       results.lowvar_eval if config.eval_poses else None,

@@ -9,8 +9,9 @@ keeps alike).
 Why it is faster than the general runner (0.039M seed-rounds/s at K = 64 on 2 cores with
 ``jax.random.beta``):
 
-* the posterior draws use :mod:`sern_jax.prng`'s exact Beta sampler (closed form when a
-  posterior parameter is 1, Cheng's BB otherwise) one try per lane and loop step instead of
+* the posterior draws use :mod:`sern_jax.prng`'s exact Beta sampler (order statistics,
+  never rejected, when a posterior parameter is 1 or 2; Cheng's BB otherwise) one try per
+  lane and loop step instead of
   ``jax.random.beta``'s per-element ``while_loop`` that every lane waits in;
 * lanes draw ahead (issue 20): a lane's posterior changes only when its arm is pulled, so a
   lane whose draw for round t is accepted goes on to its draw for round t + 1 (up to
@@ -32,7 +33,10 @@ Why it is faster than the general runner (0.039M seed-rounds/s at K = 64 on 2 co
   and the step 28 fusions (lookahead 2). Measured on one core of
   the 2-core machine (``taskset -c 0``, 256 seeds, CPU time, paired with the previous
   code in the same minutes at load 4–6): 17.2–17.3 ns per lane and step against 28–31 ns,
-  0.64M seed-rounds per CPU-second against 0.32–0.35M;
+  0.64M seed-rounds per CPU-second against 0.32–0.35M. With the rejection-free
+  min(a, b) = 2 draws the loop needs 1.32 steps per round instead of 1.41 (lookahead 3),
+  and one core ran 0.95–0.97M seed-rounds/s against the 16e89b0 code's 0.38–0.40M (paired,
+  load 1.1–1.4);
 * the runner is written over the seed axis (``[S, K]`` arrays), not ``vmap``-ed, so the
   compaction sees every seed's lanes; the argmax is a max and a min (XLA:CPU's variadic
   argmax reduction does not vectorise), and the same max says whether every lane holds its

@@ -9,11 +9,13 @@ two Gammas by rejection in a ``while_loop`` per element, so under ``vmap`` every
 the slowest one and each try re-derives keys (measured 0.039M seed-rounds/s for Thompson at
 K = 64 on 2 cores). Here:
 
-* min(a, b) = 1 has a closed form by inversion: Beta(1, b) = 1 − U^{1/b} and
-  Beta(a, 1) = U^{1/a};
-* min(a, b) > 1 uses Cheng's (1978) algorithm BB, the rejection sampler R's ``rbeta`` uses:
-  one pair of uniforms per try, accepted with probability 0.80–0.96; a lane is one case or
-  the other, so both share one log and one exp (arguments selected per lane), and BB's
+* min(a, b) ∈ {1, 2} has an exact form with no rejection, by order statistics (Rényi's
+  representation; for m = 1 it is the inversion Beta(1, b) = 1 − U^{1/b},
+  Beta(a, 1) = U^{1/a}); since 2026-11-24 (issue 20) m = 2 too, one of the commonest
+  Thompson posteriors (one success or one failure), where BB accepted only ~0.80;
+* otherwise Cheng's (1978) algorithm BB, the rejection sampler R's ``rbeta`` uses: one pair
+  of uniforms per try, accepted with probability 0.80–0.96; a lane is one case or the
+  other, so all share two logs and one exp (arguments selected per lane), and BB's
   squeezes, which only accept early what its exact test accepts, are left out (every lane
   of a vector computes the exact test anyway): per try one hash, three logs and one exp;
 * the uniforms of try ``i`` of lane ``j`` are ``threefry(key, (i, j))``: every (lane, try)
@@ -123,10 +125,16 @@ def beta_try(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
              lane: Array) -> tuple[Array, Array]:
     """One try of the exact Beta(a, b) sampler on each lane (elementwise, broadcasting).
 
-    Each lane is either the closed form (min(a, b) = 1) or Cheng's BB, so the two branches
-    share one log and one exp (their arguments selected per lane), and BB's two squeezes
-    are left out: they only accept early what its exact test accepts, and a vector computes
-    every lane's exact test anyway. Per try: one threefry hash, three logs, one exp.
+    min(a, b) = m ∈ {1, 2}: order statistics, never rejected. With n = a + b − 1, the m-th
+    smallest of n uniforms is Beta(m, n − m + 1), and by Rényi's representation
+    ``1 − X_(1) = U1^{1/n}``, ``1 − X_(2) = U1^{1/n} U2^{1/(n − 1)}`` (for real n too:
+    Beta(n, 1)·Beta(n − 1, 1) is Beta(n − 1, 2)); so Beta(m, ·) = −expm1(y) and
+    Beta(·, m) = e^y with y = log U1 / n (+ log U2 / (n − 1) for m = 2). Otherwise Cheng's
+    BB. A lane is one case or the other, so they share the same two uniforms, two logs
+    (log u1 or log(u1 / (1 − u1)); log u2 or log(u1² u2)) and one exp, arguments selected
+    per lane, and BB's squeezes are left out: they only accept early what its exact test
+    accepts, and a vector computes every lane's exact test anyway. Per try: one threefry
+    hash, three logs (the third for BB's test), one exp.
 
     Args:
       k1, k2: uint32 key words.
@@ -136,30 +144,32 @@ def beta_try(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
 
     Returns:
       ``(theta, accepted)``: the candidate draw and whether this try accepts it (always for
-      min(a, b) = 1, the closed form).
+      min(a, b) ∈ {1, 2}).
     """
     dtype = a.dtype
     w1, w2 = threefry2x32(k1, k2, try_index, lane)
     u1, u2 = open_unit(w1, dtype), open_unit(w2, dtype)
     lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
-    bb = lo > 1.0  # Cheng's BB; else the closed form (its lanes run BB on harmless values)
-    lo_s = jnp.where(bb, lo, 2.0)
-    hi_s = jnp.where(bb, hi, 2.0)
+    two = lo == 2.0
+    bb = (lo > 1.0) & ~two  # Cheng's BB (its constants harmless on the other lanes)
+    lo_s = jnp.where(bb, lo, 3.0)
+    hi_s = jnp.where(bb, hi, 3.0)
     alpha = lo_s + hi_s
     beta = jnp.sqrt((alpha - 2.0) / (2.0 * lo_s * hi_s - alpha))
     gamma = lo_s + 1.0 / beta
-    # closed form: Beta(a, 1) = U^{1/a}, Beta(1, b) = 1 − U^{1/b} (= −expm1(log U / b));
-    # BB: v = β log(u1 / (1 − u1)), w = lo·e^v
+    n = a + b - 1.0
+    # order statistics: y = log u1 / n (+ log u2 / (n − 1));
+    # BB: v = β log(u1 / (1 − u1)), w = lo·e^v, and its test reads log(u1² u2)
     x = jnp.log(jnp.where(bb, u1 / (1.0 - u1), u1))
-    y = jnp.where(bb, beta * x, x / jnp.where(a == 1.0, b, a))
+    t = jnp.log(jnp.where(bb, u1 * u1 * u2, u2))
+    y = jnp.where(bb, beta * x, x / n + jnp.where(two, t / (n - 1.0), 0.0))
     e = jnp.exp(y)
-    theta_one = jnp.where(a == 1.0, -_expm1(y, e), e)
+    theta_os = jnp.where(a == lo, -_expm1(y, e), e)
     w = lo_s * e
     # BB's exact test: γv − log 4 + α log(α / (hi + w)) ≥ log(u1² u2)
-    accept = (gamma * y - _LOG4 + alpha * jnp.log(alpha / (hi_s + w))
-              >= jnp.log(u1 * u1 * u2))
+    accept = gamma * y - _LOG4 + alpha * jnp.log(alpha / (hi_s + w)) >= t
     theta_bb = jnp.where(a == lo_s, w, hi_s) / (hi_s + w)
-    theta = jnp.where(bb, theta_bb, theta_one)
+    theta = jnp.where(bb, theta_bb, theta_os)
     theta = jnp.where(lo < 1.0, jnp.nan, theta)
     return theta.astype(dtype), accept | ~bb
 

@@ -22,10 +22,12 @@ def _draws(a, b, seed=0):
     return np.asarray(fn(keys), np.float64).ravel()
 
 
-# closed forms (a or b = 1; with a large other parameter most draws take the expm1
-# polynomial), and Cheng's BB, symmetric, skewed and large
+# order statistics (min(a, b) = 1 or 2, also with a real other parameter; with a large one
+# most draws take the expm1 polynomial), and Cheng's BB (min > 2, or between 1 and 2),
+# symmetric, skewed and large
 PAIRS = [(1.0, 1.0), (1.0, 9.0), (6.0, 1.0), (1.0, 3000.0), (2000.0, 1.0), (2.0, 2.0),
-         (2.0, 160.0), (35.0, 4.0), (300.0, 700.0)]
+         (2.0, 160.0), (9.0, 2.0), (2.0, 7.5), (1500.0, 2.0), (1.5, 4.0), (3.0, 3.0),
+         (35.0, 4.0), (300.0, 700.0)]
 
 
 @pytest.mark.parametrize("a,b", PAIRS)

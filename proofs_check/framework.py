@@ -9,7 +9,8 @@ counterexample, which must be rejected). It is split into
 
 Means over seeds (``mean_cell``, ``equal_cell``) take Student's t with n − 1 degrees of
 freedom, interval and p-value alike (the project's rule for intervals over seeds); ratios and
-slopes take a BCa bootstrap (``bootstrap_cell``), tail probabilities Clopper–Pearson.
+slopes take a BCa bootstrap interval with a Student-t p-value on its spread
+(``bootstrap_cell``), tail probabilities Clopper–Pearson.
 
 ``ctx.mutate`` swaps in a deliberately wrong bound (described by ``Check.mutation``), so the
 tests can show that every check family is able to fail on the same data.
@@ -29,10 +30,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
-from scipy.stats import norm
 
 PASS, FAIL, UNINFORMATIVE, VACUOUS = "PASS", "FAIL", "UNINFORMATIVE", "VACUOUS"
 HOLDS, FAILS = "HOLDS", "FAILS"
@@ -249,7 +249,7 @@ def tail_cell(label, k, n, bound, alpha=0.01, **kw) -> Cell:
     from sern_jax import stats
 
     k, n, b = int(k), int(n), float(bound)
-    lo, hi = stats.clopper_pearson(k, n, 1.0 - alpha, side="two")
+    _, hi = stats.clopper_pearson(k, n, 1.0 - alpha, side="two")
     lo1, _ = stats.clopper_pearson(k, n, 1.0 - alpha, side="lower")
     p = float(stats.tail_pvalue(k, n, b))
     detect = float(stats.tail_detectable_prob(n, b, alpha))
@@ -260,20 +260,33 @@ def tail_cell(label, k, n, bound, alpha=0.01, **kw) -> Cell:
 
 def bootstrap_cell(label, data, fn, bound, direction="le", alpha=0.01, seed=0,
                    num_resamples=2000, **kw) -> Cell:
-    """BCa bootstrap test of fn(column means) <= / >= bound; p-value from the bootstrap
-    distribution's one-sided tail (percentile p-value)."""
+    """BCa bootstrap test of fn(column means) <= / >= bound from per-seed rows ``data``
+    [S, d] (rows resampled together: a ratio or slope of means over seeds).
+
+    The interval stored is BCa: the tested end one-sided at 1 − alpha, the other end
+    two-sided at 1 − alpha (as in :func:`mean_cell`). The p-value and ``detectable`` are
+    Student t with S − 1 degrees of freedom (the rule for intervals over seeds, as in
+    :func:`mean_cell`) on the standard error that the two-sided BCa interval implies, se =
+    half-width / t_{1 − alpha/2, S − 1}: a bound one half-width from the estimate gets
+    p = alpha/2 (the BCa interval may be asymmetric; the p-value's fit is not).
+    (Until 2026-11-24 the same fit used normal quantiles.) A percentile p-value read off the
+    resamples was not taken: it cannot go below 1/(B + 1), and Holm over a large family
+    (t5_ratio_decreasing: 72 cells, α/72 = 1.4e-4 < 1/1001) could then never reject a slope.
+    """
+    from scipy.stats import t as student_t
+
     from sern_jax import stats
 
+    n = int(np.asarray(data).shape[0])
     est, lo, hi = stats.bootstrap_ci(data, fn, seed=seed, num_resamples=num_resamples,
                                      level=1.0 - alpha, side="two", method="bca")
     side = "lower" if direction == "le" else "upper"
     _, lo1, hi1 = stats.bootstrap_ci(data, fn, seed=seed, num_resamples=num_resamples,
                                      level=1.0 - alpha, side=side, method="bca")
-    # Approximate one-sided p-value from a normal fit of the bootstrap spread.
-    se = max((hi - lo) / (2.0 * float(norm.ppf(1.0 - alpha / 2.0))), 1e-300)
-    p = stats.mean_pvalue(est, se, float(bound), direction)
+    se = max((hi - lo) / (2.0 * float(student_t.ppf(1.0 - alpha / 2.0, n - 1))), 1e-300)
+    p = stats.t_pvalue(est, se, n, float(bound), direction)
     lower, upper = (lo1, hi) if direction == "le" else (lo, hi1)
-    exc = stats.mean_detectable_excess(se, alpha)
+    exc = stats.t_detectable_excess(se, n, alpha)
     det = float(bound) + exc if direction == "le" else float(bound) - exc
     return Cell(label, est, float(bound), direction, lower=lower, upper=upper, pvalue=p,
                 detectable=det, **kw)
@@ -356,7 +369,7 @@ def finish(check: Check, ctx: Context, cells: list[Cell], *, seeds: int, power: 
         det = [c for c in tested if not c.exact and not math.isnan(c.detectable)
                and c.informative and not c.vacuous]
         if det:
-            rel = lambda c: abs(c.detectable - c.bound) / max(abs(c.bound), 1e-300)  # noqa: E731
+            rel = lambda c: abs(c.detectable - c.bound) / max(abs(c.bound), 1e-300)
             best, worst = min(det, key=rel), max(det, key=rel)
             power = (f"smallest violation detectable with 80% power (one-sided "
                      f"{1 - ctx.alpha:.0%} per cell): {_power_str(best)} at best; "

@@ -110,3 +110,39 @@ def test_cells_record_seeds_and_se():
     e = framework.equal_cell("e", X5, 2.0)
     assert e.n == 5 and e.se == pytest.approx(SE5, rel=1e-12)
     assert framework.tail_cell("t", 3, 100, 0.5).n == 0
+
+
+def test_bootstrap_cell_pvalue_is_student_t_on_the_bca_spread():
+    """bootstrap_cell (ratios, slopes of means over seeds) keeps its BCa interval; its p-value
+    and detectable excess are Student t with n − 1 dof on the SE that the two-sided BCa
+    interval implies, se = half-width / t_{1−α/2, n−1} (the mean cells' rule), not a normal
+    fit: at 8 seeds a bound 1.5 half-widths from the estimate gets the t tail, about 10 times
+    the normal fit's p-value."""
+    rng = np.random.default_rng(3)
+    x = np.stack([1.0 + 0.3 * rng.standard_normal(8), 2.0 + 0.3 * rng.standard_normal(8)],
+                 axis=1)  # [S = 8, 2]
+
+    def ratio(m):
+        return m[..., 0] / m[..., 1]
+
+    alpha, n = 0.01, 8
+    est, lo, hi = st.bootstrap_ci(x, ratio, seed=0, num_resamples=2000, level=1 - alpha,
+                                  side="two", method="bca")
+    half = (hi - lo) / 2.0
+    se = half / sps.t.ppf(1 - alpha / 2, n - 1)
+    for k in (0.3, 1.0, 1.5, 3.0):
+        for direction, bound in (("le", est - k * half), ("ge", est + k * half),
+                                 ("le", est + k * half)):
+            c = framework.bootstrap_cell("r", x, ratio, bound, direction, alpha)
+            t = (est - bound) / se if direction == "le" else (bound - est) / se
+            assert c.pvalue == pytest.approx(sps.t.sf(t, n - 1), rel=1e-9), (k, direction)
+            excess = st.t_detectable_excess(se, n, alpha)
+            assert c.detectable == pytest.approx(
+                bound + excess if direction == "le" else bound - excess, rel=1e-9)
+            assert c.statistic == pytest.approx(est)
+            # the interval is the BCa one, as before: two-sided end beside the tested one
+            assert (c.upper if direction == "le" else c.lower) == pytest.approx(
+                hi if direction == "le" else lo, rel=1e-12)
+    far = framework.bootstrap_cell("r", x, ratio, est - 1.5 * half, "le", alpha)
+    z_fit = sps.norm.sf(1.5 * sps.norm.ppf(1 - alpha / 2))  # the normal fit's p-value
+    assert far.pvalue > 5 * z_fit

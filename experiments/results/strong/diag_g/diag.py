@@ -1,0 +1,53 @@
+"""Engineer G's device diagnostic (issue 20): where trial and context time goes on the
+16-core host. Not a result file; prints timings."""
+import concurrent.futures as cf, os, sys, time, threading
+import numpy as np, jax
+sys.path.insert(0, os.path.dirname(__file__))
+import sim_old
+from sern_jax.grasp import context as ctx, sim, objects as ol, scene, runner
+T = time.perf_counter
+print("cores", os.cpu_count(), "backend", jax.default_backend(), flush=True)
+names = ol.HARD_SET
+specs = [ol.make_object(n) for n in names]
+models = [ctx.scene_model(s) for s in specs]
+# --- resting poses
+m = models[1]
+t = T(); [scene.resting_pose(m, s) for s in range(32)]; d = T() - t
+print(f"resting_pose serial: {1e3*d/32:.2f} ms/pose", flush=True)
+for th in (4, 8, 16):
+    with cf.ThreadPoolExecutor(th) as ex:
+        t = T(); list(ex.map(lambda s: scene.resting_pose(models[s % 6], s), range(320))); d = T() - t
+    print(f"resting_pose {th} threads: {1e3*d/320:.2f} ms/pose wall", flush=True)
+# --- contexts like the runner (one thread per (object, seed) batch of 20)
+pool = cf.ThreadPoolExecutor(16)
+for rep in range(3):
+    t = T()
+    jobs = [pool.submit(runner._contexts, jax.random.key(100 * rep + i), specs[i % 6], 20, models[i % 6]) for i in range(120)]
+    out = [j.result() for j in jobs]; d = T() - t
+    print(f"contexts rep {rep}: 120 batches x 20 in {d:.2f} s ({1e3*d/2400:.2f} ms/context wall)", flush=True)
+# --- trials
+grasps, poses = [], []
+for o, (s, mdl) in enumerate(zip(specs, models)):
+    c = out[o]
+    valid = np.asarray(c[2].valid); g = np.asarray(c[2].grasps, np.float64)
+    pi, ki = np.nonzero(valid); sel = np.arange(800) % len(pi)
+    grasps.append(g[pi[sel], ki[sel]]); poses.append(np.asarray(c[0])[pi[sel]])
+t = T(); noises = [sim.sample_noise(jax.random.key(o), 800) for o in range(6)]; print(f"sample_noise x6 (800): {T()-t:.3f} s", flush=True)
+t = T(); [sim.sample_noise(jax.random.key(o), 128) for o in range(120)]; print(f"sample_noise x120 (128): {T()-t:.3f} s", flush=True)
+one = sim.GraspSimulator(models[1], num_threads=1)
+t = T(); one.run_trials(grasps[1][:64], sim.TrialNoise(*(a[:64] for a in noises[1])), object_pose=poses[1][:64]); d = T() - t
+print(f"1 thread: {1e3*d/64:.2f} ms/trial", flush=True)
+old = [sim_old.GraspSimulator(mdl) for mdl in models]
+new = [sim.GraspSimulator(mdl) for mdl in models]
+for rep in range(2):
+    t = T(); ro = [old[o].run_trials(grasps[o], noises[o], object_pose=poses[o]) for o in range(6)]; d_old = T() - t
+    t = T(); rs = [new[o].run_trials(grasps[o], noises[o], object_pose=poses[o]) for o in range(6)]; d_seq = T() - t
+    with cf.ThreadPoolExecutor(6) as ex:
+        t = T(); rn = list(ex.map(lambda o: new[o].run_trials(grasps[o], noises[o], object_pose=poses[o]), range(6))); d_new = T() - t
+    same = all(a.rise.tobytes() == b.rise.tobytes() == c.rise.tobytes() and a.success.tobytes() == c.success.tobytes() for a, b, c in zip(ro, rs, rn))
+    print(f"4800 trials: old {d_old:.2f} s ({1e3*d_old/4800:.3f} ms/trial), new per object {d_seq:.2f} s, new objects in threads {d_new:.2f} s ({1e3*d_new/4800:.3f} ms/trial); identical {same}", flush=True)
+# trials while contexts run in the background (the runner's overlap)
+bg = [pool.submit(runner._contexts, jax.random.key(900 + i), specs[i % 6], 20, models[i % 6]) for i in range(120)]
+with cf.ThreadPoolExecutor(6) as ex:
+    t = T(); rn = list(ex.map(lambda o: new[o].run_trials(grasps[o], noises[o], object_pose=poses[o]), range(6))); d_new = T() - t
+t2 = T(); [j.result() for j in bg]; print(f"new trials with 120 context batches behind: {d_new:.2f} s; contexts done {T()-t2:.2f} s later", flush=True)

@@ -297,9 +297,24 @@ def _stream(key_os: jax.Array, stream: int, round_index: int) -> jax.Array:
 
 
 def _stream_keys(keys_os, stream: int, round_index: int) -> jax.Array:
-    """[O, S] keys of one stream and round."""
-    return jnp.stack([jnp.stack([_stream(k, stream, round_index) for k in row])
-                      for row in keys_os])
+    """[O, S] keys of one stream and round: ``_stream`` of every (object, seed) key, in one
+    jitted call (threefry: the same keys as one eager ``_stream`` per copy, tested; eager,
+    the 2 x O x S fold-ins cost the main thread a dispatch each). ``keys_os``: [O, S] keys,
+    or lists of keys."""
+    if not isinstance(keys_os, jax.Array):
+        keys_os = jnp.stack([jnp.stack(list(row)) for row in keys_os])
+    return _fold_streams(keys_os, jnp.uint32(stream), jnp.uint32(round_index))
+
+
+@jax.jit
+def _fold_streams(keys, stream, round_index):
+    return jax.vmap(jax.vmap(lambda k: _stream(k, stream, round_index)))(keys)
+
+
+def _contexts_of_stream(key_os, stream, r, *args):
+    """:func:`_contexts` of ``_stream(key_os, stream, r)``, the key derived in the calling
+    (batch) thread rather than by the main thread that queues the batch."""
+    return _contexts(_stream(key_os, stream, r), *args)
 
 
 # ----------------------------------------------------------------------------- jitted steps
@@ -485,7 +500,8 @@ def _seed_noise(simulator, keys, num) -> sim_lib.TrialNoise:
     ``sample_noise(keys[s], num)[j]``, drawn for all seeds in one jitted call (the same
     values as one eager ``sample_noise`` per seed, tests/grasp/test_context_threads.py;
     eager, a call cost ~16 ms of dispatch, 120 of them per phase in the strong setting)."""
-    fric, mass, err = _noise_program(simulator.config, int(num))(jnp.stack(list(keys)))
+    keys = keys if isinstance(keys, jax.Array) else jnp.stack(list(keys))
+    fric, mass, err = _noise_program(simulator.config, int(num))(keys)
     return sim_lib.TrialNoise(np.asarray(fric, np.float64), np.asarray(mass, np.float64),
                               np.asarray(err, np.float64))
 
@@ -648,13 +664,14 @@ def run(
 
     root = jax.random.key(config.seed)
     keys_os = [[object_key(root, n, s) for s in seeds] for n in names]
+    keys_arr = jnp.stack([jnp.stack(row) for row in keys_os])  # [O, S]
     models = [context_lib.scene_model(spec, context_config) for spec in specs]
     simulators = [sim_lib.GraspSimulator(m, backend=config.backend, config=trial_config,
                                          mjx_batch=MJX_BATCH) for m in models]
     crops_fn = _batched_crops(crops_lib.CropConfig())
 
     # One state per learner, each with leading [O, S] copies.
-    states = [_batched_init(lrn.init)(_stream_keys(keys_os, INIT, 0), theta0.params, core)
+    states = [_batched_init(lrn.init)(_stream_keys(keys_arr, INIT, 0), theta0.params, core)
               for lrn in chosen]
     shape = (num_r + 1, num_o, num_q, num_s)
     results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan),
@@ -690,7 +707,7 @@ def run(
         thread_name_prefix="sern-context-batch", initializer=context_lib.lower_priority)
 
     def submit_contexts(stream, r, num):
-        return [[batches.submit(_contexts, _stream(keys_os[o][s], stream, r), specs[o], num,
+        return [[batches.submit(_contexts_of_stream, keys_os[o][s], stream, r, specs[o], num,
                                 models[o], context_config) for s in range(num_s)]
                 for o in range(num_o)]
 
@@ -744,11 +761,11 @@ def run(
         poses, depth, cands = contexts("eval", r)
         t = time.perf_counter()
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (config.evaluate,))))(
-            _stream_keys(keys_os, EVAL_UNIFORM, r)))
+            _stream_keys(keys_arr, EVAL_UNIFORM, r)))
         action = greedy_actions(states, crops_fn(depth, cands), cands, u)
         grasps = _gather(cands.grasps, action)
         success = _run_trials(simulators, grasps, poses,
-                              [[_stream(k, EVAL_TRIAL, r) for k in row] for row in keys_os],
+                              _stream_keys(keys_arr, EVAL_TRIAL, r),
                               config.evaluate, trial_counts)
         success &= action >= 0
         results.paper_eval[r] = success.mean(-1).transpose(0, 2, 1)
@@ -762,7 +779,7 @@ def run(
             rep_poses = np.repeat(poses, m, axis=2)
             success = _run_trials(
                 simulators, rep_grasps, rep_poses,
-                [[_stream(k, LOWVAR_TRIAL, r) for k in row] for row in keys_os],
+                _stream_keys(keys_arr, LOWVAR_TRIAL, r),
                 config.eval_poses * m, trial_counts)
             success = success.reshape(num_o, num_s, num_q, config.eval_poses, m)
             success &= (action >= 0)[..., None]
@@ -795,7 +812,7 @@ def run(
         image = np.asarray(crops.image)  # [O, S, E, K, c, c]
         cdepth = np.asarray(crops.depth)  # [O, S, E, K]
         o_i, s_i, e_i = np.indices(action[:, :, 0].shape)
-        fit_keys = _stream_keys(keys_os, FIT, r)
+        fit_keys = _stream_keys(keys_arr, FIT, r)
         for q, lrn in enumerate(chosen):
             idx = np.maximum(action[:, :, q], 0)
             batch = lbase.Batch((image[o_i, s_i, e_i, idx], cdepth[o_i, s_i, e_i, idx]),
@@ -818,9 +835,9 @@ def run(
         poses, depth, cands = explore_contexts(r)
         t = time.perf_counter()
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (num_e,))))(
-            _stream_keys(keys_os, POLICY_UNIFORM, r)))
+            _stream_keys(keys_arr, POLICY_UNIFORM, r)))
         crops = crops_fn(depth, cands)
-        act_root = _stream_keys(keys_os, ACT, r)
+        act_root = _stream_keys(keys_arr, ACT, r)
         t0 = jnp.int32((r - 1) * num_e)
         # π itself is needed only by the regret accounting (its pseudo-regret)
         with_probs = bool(config.regret_trials)
@@ -835,7 +852,7 @@ def run(
         t = time.perf_counter()
         grasps = _gather(cands.grasps, action)
         success = _run_trials(simulators, grasps, poses,
-                              [[_stream(k, EXPLORE_TRIAL, r) for k in row] for row in keys_os],
+                              _stream_keys(keys_arr, EXPLORE_TRIAL, r),
                               num_e, trial_counts)
         success &= action >= 0
         timings["trials"] += time.perf_counter() - t
@@ -848,7 +865,7 @@ def run(
             sub = jax.tree.map(lambda x: np.asarray(x)[:, :, :g], cands)
             select, value = (
                 _oracle(simulators, sub, poses[:, :, :g], config.regret_trials,
-                        [[_stream(k, stream, r) for k in row] for row in keys_os],
+                        _stream_keys(keys_arr, stream, r),
                         trial_counts)[:, :, None]  # [O, S, 1, g, K]
                 for stream in (ORACLE_TRIAL, ORACLE_VALUE))
             valid = np.asarray(sub.valid, bool)[:, :, None]

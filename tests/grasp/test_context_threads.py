@@ -240,3 +240,23 @@ def test_readme_quotes_the_parallel_strong_run():
     assert differing(mid, run, "paper_eval")[5] == 3 and sum(differing(mid, run, "paper_eval")) == 3
     assert sum(differing(mid, run, "lowvar_eval") + differing(mid, run, "explore_success")) == 0
     assert f"differ in 3 of {cells:,} round-5 cells of the 5-grasp figure" in readme
+
+
+def test_stream_keys_in_one_call_equal_each_copys_stream():
+    """The runner derives a stream's [O, S] keys in one jitted call: the keys of one eager
+    ``_stream`` per (object, seed), for lists of keys and for a key array."""
+    from sern_jax.grasp import runner
+
+    root = jax.random.key(3)
+    keys_os = [[runner.object_key(root, name, s) for s in range(3)] for name in ("a", "bb")]
+    arr = jax.numpy.stack([jax.numpy.stack(row) for row in keys_os])
+    seen = set()
+    for stream, r in ((runner.EXPLORE_CONTEXT, 1), (runner.EVAL_TRIAL, 5), (runner.ACT, 0),
+                      (runner.ORACLE_VALUE, 2**20)):
+        want = np.asarray(jax.random.key_data(jax.numpy.stack([jax.numpy.stack(
+            [runner._stream(k, stream, r) for k in row]) for row in keys_os])))
+        for given in (keys_os, arr):
+            got = np.asarray(jax.random.key_data(runner._stream_keys(given, stream, r)))
+            assert got.tobytes() == want.tobytes(), (stream, r)
+        seen.add(want.tobytes())
+    assert len(seen) == 4

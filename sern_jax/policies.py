@@ -208,9 +208,9 @@ def thompson_probs(key: Key, counts: Array, sums: Array) -> Array:
 
     Returns:
       [K] one-hot of ``argmax_a θ_a`` with ``θ_a ~ Beta(1 + S_a, 1 + n_a − S_a)``, drawn by
-      :func:`sern_jax.prng.sample_beta` (exact; closed form or Cheng's BB per arm, rejected
-      lanes retried alone; ``jax.random.beta``'s per-element rejection loop serialised the
-      lanes under ``vmap``).
+      :func:`sern_jax.prng.sample_beta` (exact; order statistics when a parameter is 1 or 2,
+      Cheng's BB otherwise, rejected lanes retried alone; ``jax.random.beta``'s per-element
+      rejection loop serialised the lanes under ``vmap``).
     """
     a = 1.0 + sums
     b = 1.0 + counts.astype(sums.dtype) - sums

@@ -138,7 +138,7 @@ def test_pooled_native_trials_equal_one_thread_bit_for_bit():
     for threads, chunk in ((3, 256), (2, 5), (4, 1)):
         sims = [sim.GraspSimulator(m, num_threads=threads, chunk=chunk) for m, *_ in cases]
         with concurrent.futures.ThreadPoolExecutor(2) as ex:
-            got = list(ex.map(lambda i: fields(sims[i].run_trials(
+            got = list(ex.map(lambda i, sims=sims: fields(sims[i].run_trials(
                 cases[i][1], cases[i][2], object_pose=cases[i][3])), range(2)))
         assert got == want, (threads, chunk)
         assert threads in sim._TRIAL_POOLS
@@ -260,3 +260,39 @@ def test_stream_keys_in_one_call_equal_each_copys_stream():
             assert got.tobytes() == want.tobytes(), (stream, r)
         seen.add(want.tobytes())
     assert len(seen) == 4
+
+
+def test_readme_quotes_the_two_round_check_after_f66087f():
+    """The README's 2-round check after f66087f: round 1's saved-at time, its stages adding up
+    to its length, and its figures equal to the 5-round run's, from the committed files."""
+    import json
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    folder = root / "experiments" / "results" / "strong" / "single_command_h100_dbe31c2"
+    readme = " ".join((root / "README.md").read_text().split())
+    log = (folder / "rounds2_f66087f_log.txt").read_text()
+    full_log = (folder / "log.txt").read_text()
+    r2 = json.loads((folder / "rounds2_f66087f_strong.json").read_text())
+    full = json.loads((folder / "strong.json").read_text())
+    assert " --rounds 2" in r2["command"] and r2["rounds_done"] == 2
+
+    def rounds(text):
+        return [(int(a), {k: int(v) for k, v in re.findall(r"(\w+) (\d+) s", b)})
+                for a, b in re.findall(r"round \d/\d saved at (\d+) s; (.*)", text)]
+
+    (t0, s0), (t1, s1), _ = rounds(log)
+    stages = sum(s1.values()) - sum(s0.values())
+    assert t1 - t0 == stages == 52 and "its 52 s with nothing lost outside them" in readme
+    before = rounds(full_log)[1][0]
+    assert f"saved round 1 at {t1} s instead of {before} s" in readme
+    for field in ("lowvar_eval", "paper_eval", "explore_success"):
+        assert np.array_equal(np.asarray(r2[field]), np.asarray(full[field])[:3]), field
+    assert "rounds 0–2 equal the 5-round run's in every cell" in readme
+    # the per-round main-thread fold-ins the README counts at dbe31c2: 4 key streams of the
+    # learners + 3 trial-noise streams per round, 2 fold-ins per (object, seed), and 2 kinds
+    # of contexts queued per round
+    copies = len(full["objects"]) * full["seeds"]
+    assert (4 + 3 + 2) * 2 * copies == 2160 and 2 * 2 * copies == 480
+    assert "2,160 per round, 480 of them queueing the next contexts" in readme

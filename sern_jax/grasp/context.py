@@ -258,15 +258,22 @@ def context_threads() -> int:
 
 
 BACKGROUND_NICE = 10  # niceness of the context threads (made ahead of need)
+BACKGROUND_NICE_MIN_CORES = 8  # ... on hosts with at least this many usable cores
 
 
 def lower_priority() -> None:
     """Lowers the calling thread's CPU priority to niceness ``BACKGROUND_NICE`` (Linux: a
-    thread's own niceness; elsewhere, or if refused, nothing happens). The threads that
-    make contexts ahead of need call it, so under full load the cores go first to the
+    thread's own niceness; elsewhere, or if refused, nothing happens) on a host with at
+    least ``BACKGROUND_NICE_MIN_CORES`` usable cores. The threads that make contexts ahead
+    of need call it, so on a many-core host (16 context threads) the cores go first to the
     threads the run waits on (the main thread's compiles and dispatch, the trial workers);
-    idle cores still make contexts. Scheduling only: results are the same."""
+    idle cores still make contexts. On a few shared cores it is left off: there niceness
+    would hand the cores to other processes' work while the run waits for its contexts (on
+    the shared 2-core machine at load ~5, a run with it saved round 1 at 210 s against the
+    code before's 121 s; suspected, not isolated). Scheduling only: results are the same."""
     try:
+        if len(os.sched_getaffinity(0)) < BACKGROUND_NICE_MIN_CORES:
+            return
         tid = threading.get_native_id()
         current = os.getpriority(os.PRIO_PROCESS, tid)
         if current < BACKGROUND_NICE:

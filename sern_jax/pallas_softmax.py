@@ -3,7 +3,8 @@
 ``make_pallas_run(config)`` returns ``fn(keys [S], params) -> simulate.RunOutput`` (leading
 axis S) with the semantics, random draws and outputs of ``vmap(fast_softmax.make_fast_run)``
 for the configurations :func:`supports` accepts (those of :mod:`sern_jax.fast_softmax`, in
-float32, with K a power of two: Triton tensors have power-of-two sizes).
+float32, with K a power of two, 2 ≤ K ≤ 256: Triton tensors have power-of-two sizes, and
+:func:`_tiled_prefix_sums` follows XLA's cumsum order only up to 16 tiles of 16).
 
 Why a kernel. On a GPU the XLA engine keeps each seed's ``[K]`` weights, prefix sums,
 statistics and compensator in HBM and streams them through every round (1.04G seed-rounds/s
@@ -47,35 +48,46 @@ and will be removed in a future version: this module then needs Mosaic GPU or ja
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import fast_softmax
-from sern_jax import schedules
+from sern_jax import fast_softmax, schedules
 from sern_jax import simulate as sim
 from sern_jax.prng import threefry2x32
 from sern_jax.types import Array, Key
 
-__all__ = ["supports", "make_pallas_run", "pad_seeds", "REBASE_MODES",
-           "DEFAULT_SEEDS_PER_PROGRAM", "DEFAULT_NUM_WARPS"]
+__all__ = [
+    "DEFAULT_NUM_WARPS",
+    "DEFAULT_SEEDS_PER_PROGRAM",
+    "MAX_ARMS",
+    "REBASE_MODES",
+    "make_pallas_run",
+    "pad_seeds",
+    "supports",
+]
 
 DEFAULT_SEEDS_PER_PROGRAM = 16  # B: seeds one program instance owns (rows of its tiles)
 DEFAULT_NUM_WARPS = 4
 REBASE_MODES = ("tiled16", "scan", "sequential")
+MAX_ARMS = 256  # 16 tiles of 16: the K up to which _tiled_prefix_sums is XLA's cumsum order
 
 
 def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool:
     """Whether :func:`make_pallas_run` reproduces the fast engine for ``config``.
 
     True when ``fast_softmax.supports(config, params)`` holds, the dtype is float32 and
-    K is a power of two (2 ≤ K ≤ 1024).
+    K is a power of two with 2 ≤ K ≤ ``MAX_ARMS`` (256). Above 256 (more than 16 tiles of 16)
+    XLA's cumsum also sums the tile totals in tiles, which :func:`_tiled_prefix_sums` does not
+    (its prefix sums equal ``jnp.cumsum``'s on ~0.78 of elements at K = 512, ~0.54 at 1024;
+    on an H100 at K = 1024 the counts matched the engine's on 0.959 of seeds).
     """
     k = config.num_arms
     return (fast_softmax.supports(config, params) and config.dtype == "float32"
-            and 2 <= k <= 1024 and k & (k - 1) == 0)
+            and 2 <= k <= MAX_ARMS and k & (k - 1) == 0)
 
 
 def pad_seeds(num_seeds: int, seeds_per_program: int) -> int:
@@ -87,7 +99,9 @@ def _tiled_prefix_sums(w: Array, tile: int) -> Array:
     """``[B, K]`` prefix sums of ``w`` along K in XLA's order for ``jnp.cumsum`` (its
     ``ReduceWindowRewriter``, base length 16, on CPU and GPU alike; ``tile ≥ K``: plain left
     to right): left to right within tiles of ``tile`` arms, then each tile plus the left-to-right
-    sum of the earlier tiles' totals.
+    sum of the earlier tiles' totals. That is XLA's order for at most 16 tiles (K ≤ 256 with
+    tile 16); with more, XLA sums the tile totals in tiles of 16 too and this order differs
+    (``supports`` caps K at 256).
 
     Written with explicit additions on ``[B, K/tile, tile]`` views, one column of every tile at
     a time (a masked sum picks the column: exact, the other terms are +0), so every platform
@@ -177,7 +191,7 @@ def make_pallas_run(
     if not supports(config):
         raise ValueError(
             f"pallas_softmax supports what fast_softmax supports, in float32, with num_arms a "
-            f"power of two in [2, 1024]; got policy={config.policy!r}, estimator="
+            f"power of two in [2, {MAX_ARMS}]; got policy={config.policy!r}, estimator="
             f"{config.estimator!r}, num_contexts={config.num_contexts}, dtype={config.dtype!r}, "
             f"num_arms={config.num_arms}, diagnostics={config.diagnostics}")
     for name, v in (("seeds_per_program", seeds_per_program), ("block", block)):
@@ -325,9 +339,9 @@ def make_pallas_run(
 
     def call(seg, env0, env1, ag0, ag1, means, inv_alpha, pinned_arm):
         num_seeds = env0.shape[0]
-        row = lambda i: (i,)  # noqa: E731
-        row2 = lambda i: (i, 0)  # noqa: E731
-        row3 = lambda i: (i, 0, 0)  # noqa: E731
+        row = lambda i: (i,)
+        row2 = lambda i: (i, 0)
+        row3 = lambda i: (i, 0, 0)
         kwargs = {}
         if not interpret:
             from jax.experimental.pallas import triton as pltriton
@@ -380,7 +394,7 @@ def make_pallas_run(
             jnp.asarray(segs), kd_env[:, 0], kd_env[:, 1], kd_agent[:, 0], kd_agent[:, 1],
             means, inv_alpha, pinned_arm)
         ok = alpha >= amin
-        poison = lambda x: jnp.where(ok, x[:num_seeds], jnp.nan)  # noqa: E731
+        poison = lambda x: jnp.where(ok, x[:num_seeds], jnp.nan)
         reg, rb = poison(reg), poison(rb)
         return sim.RunOutput(regret=reg, regret_paper=reg, regret_rb=rb, regret_rb_paper=rb,
                              counts=counts[:num_seeds], compensator=poison(comp),

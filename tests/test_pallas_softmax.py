@@ -89,6 +89,14 @@ def test_scan_rebase_is_xla_cumsum_in_the_interpreter(k64):
     _assert_same(_kernel(cfg, params, keys, rebase="scan"), eng, cfg)
 
 
+@pytest.mark.parametrize("num_arms", [2, 4, 8])
+def test_small_k_outputs_equal_the_engine(num_arms):
+    """K = 2, 4, 8 (one tile shorter than 16; sern bench bandit --pallas accepts them)."""
+    cfg, params = _setup(num_arms, 140)
+    keys = sim.seed_keys(jax.random.key(5), 16)
+    _assert_same(_kernel(cfg, params, keys), _engine(cfg, params, keys), cfg)
+
+
 @pytest.mark.parametrize("estimator,schedule,random_means,alpha0", [
     ("l1median", "theorem4", True, 1.0),  # the default run's case; the others are slow
     pytest.param("mean", "log", False, 1.0, marks=pytest.mark.slow),
@@ -118,10 +126,17 @@ def test_tiled_prefix_sums_are_xla_cumsum_bit_for_bit():
     rng = np.random.default_rng(0)
     cumsum = jax.jit(lambda v: jnp.cumsum(v, axis=1))
     tiled = jax.jit(ps._tiled_prefix_sums, static_argnums=1)
-    for k in (8, 16, 32, 64, 128):
+    for k in (2, 4, 8, 16, 32, 64, 128, 256):
         w = jnp.asarray(rng.random((64, k), np.float32) + 1e-3)
         np.testing.assert_array_equal(np.asarray(tiled(w, 16)),
                                       np.asarray(cumsum(w)), err_msg=str(k))
+    assert ps.MAX_ARMS == 256
+    # above 16 tiles XLA sums the tile totals in tiles too: another order, so K = 512 is
+    # unsupported (the kernel would not reproduce the engine there)
+    w = jnp.asarray(rng.random((64, 512), np.float32) + 1e-3)
+    assert not np.array_equal(np.asarray(tiled(w, 16)), np.asarray(cumsum(w)))
+    for k, ok in ((2, True), (4, True), (8, True), (256, True), (512, False), (1024, False)):
+        assert ps.supports(sim.RunConfig(num_arms=k, horizon=50)) is ok, k
     # the control: a plain left-to-right sum is another order (differs at K = 64), so the
     # test above can tell orders apart
     w = jnp.asarray(rng.random((64, 64), np.float32))
@@ -142,6 +157,7 @@ def test_alpha_below_the_float32_minimum_gives_nan_like_the_engine():
 @pytest.mark.parametrize("cfg_kw,kw,match", [
     ({"policy": "thompson"}, {}, "supports what fast_softmax supports"),
     ({"num_arms": 12}, {}, "power of two"),
+    ({"num_arms": 512}, {}, r"power of two in \[2, 256\]"),
     ({"diagnostics": True}, {}, "diagnostics=True"),
     ({"num_contexts": 2}, {}, "num_contexts=2"),
     ({}, {"seeds_per_program": 12}, "seeds_per_program must be a power of two"),
@@ -190,18 +206,23 @@ def test_bench_pallas_path_agrees_seed_by_seed():
             f"pallas_{name}_equal_fast_fraction"
         assert agree[key] == 1.0, key
     assert agree["pallas_mean_regret_T"] == agree["fast_mean_regret_T"]
-    assert not dataclasses.replace(w, pallas=False).pallas  # the default stays off
-    assert benchmarks.BanditWorkload().pallas is False
+    assert benchmarks.BanditWorkload().pallas is False  # the default stays off
+    off = benchmarks.bandit_benchmark(dataclasses.replace(w, pallas=False))
+    assert "pallas" not in off and off["pallas_seed_rounds_per_s"] is None
 
 
 @pytest.mark.parametrize("argv,match", [
     (["--pallas", "--policy", "thompson"], "--pallas needs --policy softmax"),
     (["--pallas", "--arms", "12"], "--pallas needs --arms a power of two"),
     (["--pallas", "--arms", "2048"], "--pallas needs --arms a power of two"),
+    (["--pallas", "--arms", "512"], "--pallas needs --arms a power of two in [2, 256]"),
     (["--pallas", "--devices", "2"], "--pallas runs on one device"),
-    (["--pallas"], "--pallas needs a GPU"),  # this machine's backend is the CPU
+    (["--pallas"], "--pallas needs a GPU"),  # off-GPU only (skipped on a GPU)
+    (["--pallas", "--arms", "4"], "--pallas needs a GPU"),  # K = 4 passes the --arms check
 ])
 def test_bench_pallas_bad_input(argv, match, capsys):
+    if "needs a GPU" in match and jax.default_backend() == "gpu":
+        pytest.skip("runs on a GPU")
     assert cli.main(["bench", "bandit", "--json", *argv]) == 2
     err = capsys.readouterr().err
     assert match in err and len(err.strip().splitlines()) == 1

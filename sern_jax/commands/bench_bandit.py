@@ -103,9 +103,11 @@ def _validate(args) -> None:
             raise ValueError("--pallas needs --policy softmax (the kernel is SERN softmax's)")
         if args.devices > 1:
             raise ValueError("--pallas runs on one device: use --devices 0 or 1")
-        if not 16 <= args.arms <= 1024 or args.arms & (args.arms - 1):
-            raise ValueError(f"--pallas needs --arms a power of two in [16, 1024], got "
-                             f"{args.arms}")
+        from sern_jax import pallas_softmax
+
+        if not 2 <= args.arms <= pallas_softmax.MAX_ARMS or args.arms & (args.arms - 1):
+            raise ValueError(f"--pallas needs --arms a power of two in [2, "
+                             f"{pallas_softmax.MAX_ARMS}], got {args.arms}")
         import jax
 
         if jax.default_backend() != "gpu":

@@ -289,7 +289,7 @@ def bootstrap_cell(label, data, fn, bound, direction="le", alpha=0.01, seed=0,
     exc = stats.t_detectable_excess(se, n, alpha)
     det = float(bound) + exc if direction == "le" else float(bound) - exc
     return Cell(label, est, float(bound), direction, lower=lower, upper=upper, pvalue=p,
-                detectable=det, **kw)
+                detectable=det, n=n, se=se, **kw)
 
 
 # ---------------------------------------------------------------------------------------

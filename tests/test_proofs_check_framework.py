@@ -140,6 +140,8 @@ def test_bootstrap_cell_pvalue_is_student_t_on_the_bca_spread():
             assert c.detectable == pytest.approx(
                 bound + excess if direction == "le" else bound - excess, rel=1e-9)
             assert c.statistic == pytest.approx(est)
+            # the seeds and SE behind the p-value are recorded (reports: n 0, se nan before)
+            assert c.n == n and c.se == pytest.approx(se, rel=1e-12)
             # the interval is the BCa one, as before: two-sided end beside the tested one
             assert (c.upper if direction == "le" else c.lower) == pytest.approx(
                 hi if direction == "le" else lo, rel=1e-12)

@@ -253,6 +253,16 @@ def test_readme_row_is_the_committed_h100_record():
     row = next(line for line in readme.splitlines() if "pallas_bench_h100.json" in line)
     for figure in (kernel, fast, ratio, "200,000", rb_text):
         assert figure in row, (figure, row)
+    # every other figure of the row: the public path's (run_seeds, per-seed arrays) is the
+    # record's, the kernel is named bench-only and not bold (nothing public calls it), and the
+    # row says the record's prng.py was uncommitted (pallas_h100_sha1.txt)
+    public = f"per-seed arrays {r['run_seeds_seed_rounds_per_s'] / 1e9:.2f}G"
+    assert public in row and row.index(public) < row.index(kernel), row
+    assert "bench-only" in row and "sern bench bandit --pallas" in row
+    assert f"**{kernel}" not in row and f"{kernel}**" not in row
+    figures = re.findall(r"\d+(?:\.\d+)?(?:G|×)|\d{1,3}(?:,\d{3})+|0\.\d+", row)
+    assert set(figures) == {kernel, fast, ratio, public.split()[-1], "200,000", rb_text}, figures
+    assert "uncommitted" in row and "pallas_h100_sha1.txt" in row
     notes = (BENCH / "pallas_README.md").read_text()
     for figure in (kernel, fast, ratio, rb_text.lstrip("0")):
         assert figure in notes, figure

@@ -406,9 +406,9 @@ def main(argv=None) -> int:
                    help="default-d0: worker counts that run every object")
     p.add_argument("--sample-every", type=count, default=8,
                    help="default-d0: the one-worker run takes every k-th object")
-    p.add_argument("--sample-size", type=count, default=24,
+    p.add_argument("--sample-size", type=validate.int_at_least(2), default=24,
                    help="d0-sampled: objects in the one-worker run's random sample")
-    p.add_argument("--sample-seed", type=int, default=20261124,
+    p.add_argument("--sample-seed", type=validate.int_at_least(0), default=20261124,
                    help="d0-sampled: numpy.random.default_rng seed of the sample")
     for hidden in ("--child-json", "--child-out"):
         p.add_argument(hidden, default=None, help=argparse.SUPPRESS)
@@ -437,6 +437,16 @@ def main(argv=None) -> int:
         p.error(f"--workers must be a comma list of integers, got {args.workers!r}")
     if 1 not in workers or any(w < 1 for w in workers):
         p.error("--workers must include 1 (the reference) and be positive")
+    if args.mode in ("default-d0", "d0-sampled"):
+        try:
+            full = [int(w) for w in args.full_workers.split(",") if w]
+        except ValueError:
+            full = []
+        if not full or any(w < 2 for w in full):
+            p.error(f"--full-workers must be a comma list of worker counts >= 2, got "
+                    f"{args.full_workers!r}")
+    if args.mode == "d0-sampled" and args.sample_size > args.objects:
+        p.error(f"--sample-size must be <= --objects ({args.objects}), got {args.sample_size}")
     cache = args.cache or str((args.out / ".jax_cache").resolve())
     from sern_jax import io
 

@@ -7,8 +7,8 @@ float32, with K a power of two, 2 ≤ K ≤ 256: Triton tensors have power-of-tw
 :func:`_tiled_prefix_sums` follows XLA's cumsum order only up to 16 tiles of 16).
 
 Why a kernel. On a GPU the XLA engine keeps each seed's ``[K]`` weights, prefix sums,
-statistics and compensator in HBM and streams them through every round (1.04G seed-rounds/s
-on one H100 at K = 64). Here one program instance owns ``seeds_per_program`` seeds, holds
+statistics and compensator in HBM and streams them through every round (1.03G seed-rounds/s
+on one H100 at K = 64: 1.031–1.035G in every pallas record, experiments/results/bench/). Here one program instance owns ``seeds_per_program`` seeds, holds
 their ``[B, K]`` state in registers for all T rounds, and writes only the checkpoint outputs.
 
 What one seed-round does (the same as :mod:`sern_jax.fast_softmax`, op for op):
@@ -29,7 +29,9 @@ What one seed-round does (the same as :mod:`sern_jax.fast_softmax`, op for op):
 Same arithmetic as the engine (all float32), checked op by op against XLA on the H100
 (``experiments/results/bench/pallas_ops_probe_h100.json``): ``exp`` is libdevice's
 ``__nv_expf`` in both (100 % equal), division is plain ``/`` (Triton's equals XLA's on 100 %;
-IEEE ``div.rn`` would not), ``a + b·c`` contracts to the same FMA in both (100 %), and the
+IEEE ``div.rn`` would not), ``a + b·c`` gives the same float32 in both (100 %; whether
+either contracts it to an FMA was not established: XLA's equals the once-rounded value on
+75.7 % only, so likely neither does), and the
 prefix sums at each rebase follow XLA's own order for the engine's ``jnp.cumsum``
 (:func:`_tiled_prefix_sums`). One difference is left: ``Σ_a w_a r_a`` at each rebase is
 ``sum(w·r)`` here and ``dot(w, r)`` in the engine, so the Rao–Blackwellised regret may differ
@@ -38,6 +40,8 @@ In Pallas' interpreter (CPU) every output equals the engine's bit for bit (tests
 GPU ``sern bench bandit --pallas`` reports the fraction of seeds whose outputs equal the
 engine's.
 
+One device only: the kernel is not sharded (``sern bench bandit --pallas`` refuses
+``--devices`` > 1), and nothing public calls it: it is a bench-only path beside the engine.
 Use ``interpret=True`` off-GPU (tests); on a GPU the kernel compiles through Triton
 (``jax.experimental.pallas.triton.CompilerParams``; Mosaic GPU is JAX's default otherwise).
 Measured on one H100 (jax 0.11.2; experiments/results/bench/pallas_README.md): 5.00G
@@ -82,8 +86,8 @@ def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool
     True when ``fast_softmax.supports(config, params)`` holds, the dtype is float32 and
     K is a power of two with 2 ≤ K ≤ ``MAX_ARMS`` (256). Above 256 (more than 16 tiles of 16)
     XLA's cumsum also sums the tile totals in tiles, which :func:`_tiled_prefix_sums` does not
-    (its prefix sums equal ``jnp.cumsum``'s on ~0.78 of elements at K = 512, ~0.54 at 1024;
-    on an H100 at K = 1024 the counts matched the engine's on 0.959 of seeds).
+    (on CPU its prefix sums equal ``jnp.cumsum``'s on ~0.79 of elements at K = 512, ~0.53 at
+    1024), so the kernel would not reproduce the engine there.
     """
     k = config.num_arms
     return (fast_softmax.supports(config, params) and config.dtype == "float32"

@@ -118,8 +118,8 @@ def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"{flag} {run_dir} exists and is not a directory")
 
-    def refuse(old) -> None:
-        raise ValueError(f"{run_dir} holds a different {what} (fingerprint {old} != "
+    def refuse(old, kind=what) -> None:
+        raise ValueError(f"{run_dir} holds a different {kind} (fingerprint {old} != "
                          f"{fingerprint}); choose another {flag} or delete it")
 
     if checkpoint is not None and (run_dir / checkpoint).exists():
@@ -139,7 +139,10 @@ def check_run_dir(run_dir: str | os.PathLike, fingerprint: str, *,
     if not isinstance(old, dict):  # commands turn ValueError into exit 2: not a TypeError
         raise ValueError(f"{cfg_path} is unreadable; choose another {flag} or delete it")  # noqa: TRY004
     if old.get("fingerprint") != fingerprint:
-        refuse(old.get("fingerprint"))
+        # without the checkpoint this kind of run saves, the directory may be any command's
+        # run (e.g. a finished `sern regret`): do not call it a different ``what``
+        known = checkpoint is None or (run_dir / checkpoint).exists()
+        refuse(old.get("fingerprint"), what if known else "run")
 
 
 def _umask() -> int:

@@ -215,3 +215,17 @@ def test_check_run_dir_refuses_in_one_line(tmp_path):
         assert str(e.value) == (f"{tmp_path / 'config.json'} is unreadable; choose another "
                                 f"--out-dir or delete it")
         assert "\n" not in str(e.value)
+
+
+def test_check_run_dir_names_no_kind_without_its_checkpoint(tmp_path):
+    """A directory with another fingerprint's config.json and none of the checkpoint this kind
+    of run saves (e.g. a finished `sern regret` run given to `sern grasp learn`) is "a
+    different run", not "a different learning run"; with the checkpoint it is named."""
+    io.save_json(tmp_path / "config.json", {"fingerprint": "abc"})
+    with pytest.raises(ValueError) as e:
+        io.check_run_dir(tmp_path, "xyz", what="learning run", checkpoint="checkpoint.npz")
+    assert str(e.value) == (f"{tmp_path} holds a different run (fingerprint abc != xyz); "
+                            f"choose another --out or delete it")
+    io.save_npz(tmp_path / "checkpoint.npz", fingerprint=np.asarray("abc"))
+    with pytest.raises(ValueError, match="holds a different learning run"):
+        io.check_run_dir(tmp_path, "xyz", what="learning run", checkpoint="checkpoint.npz")

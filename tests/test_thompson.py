@@ -265,3 +265,12 @@ def test_readme_quotes_the_8b9124f_bench_files():
             f"{float(head):.2f}M seed-rounds per CPU-second against {float(old):.2f}M"):
         assert quoted in text, quoted
     assert "16e89b0" in paired and "steps/round 1.321" in paired
+    fifth = json.loads((bench / "bandit_thompson_2core_8b9124f_5.json").read_text())
+    assert fifth["workload"] == quiet["workload"] and fifth["speedup_vs_numpy"] < 5
+    assert (fifth["regret_agreement"]["fast_mean_regret_T"]
+            == quiet["regret_agreement"]["fast_mean_regret_T"])  # the same draws
+    quoted = (f"a fifth at 18:37 UTC at load {loads([fifth])} (code of c3a17ac, float32 path "
+              f"unchanged): best path {fifth['seed_rounds_per_s'] / 1e6:.2f}M, "
+              f"{fifth['speedup_vs_numpy']:.1f}× NumPy's "
+              f"{fifth['numpy_seed_rounds_per_s'] / 1e6:.2f}M")
+    assert quoted in text, quoted

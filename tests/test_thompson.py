@@ -274,3 +274,45 @@ def test_readme_quotes_the_8b9124f_bench_files():
               f"{fifth['speedup_vs_numpy']:.1f}× NumPy's "
               f"{fifth['numpy_seed_rounds_per_s'] / 1e6:.2f}M")
     assert quoted in text, quoted
+
+
+def test_readme_quotes_the_lead_idle_thompson_runs():
+    """The lead's three idle re-runs at 5c1a869: every figure of the README's lead sentence is
+    recomputed from the committed records, and each run meets the goal (>= 1M, >= 5x NumPy in
+    the same process) on the best path and on run_seeds with per-seed arrays."""
+    import json
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    bench = root / "experiments/results/bench"
+    recs = [json.loads((bench / f"bandit_thompson_2core_idle_5c1a869_{i}.json").read_text())
+            for i in (1, 2, 3)]
+    runs = [r["bench"] for r in recs]
+    for rec, r in zip(recs, runs):
+        assert rec["commit"] == "5c1a869" and "--policy thompson" in rec["command"]
+        w = r["workload"]
+        assert (w["policy"], w["num_arms"], w["horizon"], w["seeds"], r["numpy_seeds"]) == (
+            "thompson", 64, 2000, 1024, 256)
+        npy = r["numpy_seed_rounds_per_s"]
+        for rate in (r["seed_rounds_per_s"], r["run_seeds_seed_rounds_per_s"]):
+            assert rate >= 1e6 and rate / npy >= 5
+    text = " ".join((root / "README.md").read_text().split())
+
+    def m(xs):
+        return ", ".join(f"{x / 1e6:.2f}M" for x in xs[:2]) + f" and {xs[2] / 1e6:.2f}M"
+
+    def x(xs):
+        return ", ".join(f"{v:.1f}×" for v in xs[:2]) + f" and {xs[2]:.1f}×"
+
+    best = [r["seed_rounds_per_s"] for r in runs]
+    npy = [r["numpy_seed_rounds_per_s"] for r in runs]
+    per_seed = [r["run_seeds_seed_rounds_per_s"] for r in runs]
+    quoted = (f"best path {m(best)} seed-rounds/s, {x([b / n for b, n in zip(best, npy)])} "
+              f"NumPy's {m(npy)} in the same process; `run_seeds` with per-seed arrays "
+              f"{m(per_seed)} (" + ", ".join(f"{p / n:.1f}×" for p, n in zip(per_seed, npy))
+              + ")")
+    quoted = quoted.replace("M and 0.22M in", "M and 0.22M in")
+    assert quoted in text, quoted
+    slow = min(per_seed) / 0.25e6
+    assert f"slowest `run_seeds` run would be {slow:.1f}×" in text
+    assert f"the slowest best path {min(best) / 0.25e6:.1f}×" in text

@@ -221,7 +221,8 @@ def test_learn_run_dir_check_is_ios(tmp_path, monkeypatch, capsys):
     before = _listing(other)
     assert _learn(other) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "holds a different learning run (fingerprint 0123456789abcdef" \
+    # not a learning run's directory (no checkpoint.npz): named neutrally, "a different run"
+    assert len(err) == 1 and "holds a different run (fingerprint 0123456789abcdef" \
         in err[0] and "--out" in err[0], err
     assert _listing(other) == before and not reached
 
@@ -238,6 +239,7 @@ def test_learn_run_dir_check_is_ios(tmp_path, monkeypatch, capsys):
     before_config_only = _listing(run)
     assert _learn(run, "--explore", "3") == 2  # config.json alone still refuses
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and all("holds a different learning run" in e for e in err), err
+    assert len(err) == 2 and "holds a different learning run" in err[0], err  # checkpoint
+    assert "holds a different run (fingerprint" in err[1], err  # config.json alone
     assert _listing(run) == before_config_only and len(reached) == 2
     assert set(before) - set(before_config_only) == {"checkpoint.npz"}

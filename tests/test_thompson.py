@@ -33,7 +33,12 @@ PAIRS = [(1.0, 1.0), (1.0, 9.0), (6.0, 1.0), (1.0, 3000.0), (2000.0, 1.0), (2.0,
 @pytest.mark.parametrize("a,b", PAIRS)
 def test_beta_draws_match_scipy_and_a_wrong_parameter_fails(a, b):
     x = _draws(a, b)
-    assert np.all((x > 0) & (x < 1))
+    # Beta's support in float32 is [0, 1]: a draw within half an ulp of 1 rounds to 1.0 (the
+    # H100's exp does so for Beta(2000, 1); about 2000 * 2^-25 of the true draws lie there),
+    # so the ends are allowed, but only as often as that rounding explains
+    assert np.all((x >= 0) & (x <= 1))
+    near = max(a, b) * 2.0 ** -24  # generous: the mass within one ulp of either end
+    assert np.mean((x == 0) | (x == 1)) <= 10 * near + 10 / x.size
     assert st.kstest(x, st.beta(a, b).cdf).pvalue > 1e-3
     # control: a 10% larger first parameter is detected by the same test on the same draws
     assert st.kstest(x, st.beta(a * 1.1, b).cdf).pvalue < 1e-3

@@ -8,6 +8,12 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results"
 
 
+def _wall(record) -> float:
+    """Seconds of a /usr/bin/time "m:ss.ss" wall clock in a committed record."""
+    m, s = record["wall_clock"].split(":")
+    return 60 * int(m) + float(s)
+
+
 def _readme():
     return " ".join((ROOT / "README.md").read_text().split())
 
@@ -15,8 +21,7 @@ def _readme():
 def test_reproduce_idle_timing_quoted():
     d = json.loads((RESULTS / "reproduce" / "reproduce_2core_idle.json").read_text())
     assert d["exit_status"] == 0 and d["summary_checks"] == "28/28 verdicts as expected"
-    m, s = d["wall_clock"].split(":")
-    wall = 60 * int(m) + float(s)
+    wall = _wall(d)
     assert wall < 300  # the README's "under 5 minutes on 2 cores"
     t = d["timings"]
     quoted = (f"takes {int(wall // 60)} min {round(wall % 60)} s under the 20 N trial "
@@ -60,8 +65,7 @@ def test_reproduce_idle_retiming_quoted():
     d = json.loads((RESULTS / "reproduce" / "reproduce_2core_idle_a1753bd.json").read_text())
     assert d["exit_status"] == 0 and d["summary_checks"] == "28/28 verdicts as expected"
     assert d["metadata"]["git_commit"].startswith(d["commit"])
-    m, s = d["wall_clock"].split(":")
-    wall = 60 * int(m) + float(s)
+    wall = _wall(d)
     assert wall < 300
     t = d["timings"]
     quoted = (f"it took {int(wall // 60)} min {round(wall % 60)} s (checks {t['check_s']:.0f} s, "
@@ -78,8 +82,7 @@ def test_reproduce_slow_hour_retiming_quoted():
     holds the quoted grasp-learning times."""
     d = json.loads((RESULTS / "reproduce" / "reproduce_2core_slowhour_0787e20.json").read_text())
     assert d["exit_status"] == 0 and d["metadata"]["git_commit"].startswith(d["commit"])
-    m, s = d["wall_clock"].split(":")
-    wall = 60 * int(m) + float(s)
+    wall = _wall(d)
     t = d["timings"]
     quoted = (f"Re-timed at {d['commit']} it took {int(wall // 60)} min {round(wall % 60)} s "
               f"(checks {t['check_s']:.0f} s, regret {t['regret_s']:.0f} s, grasp learning "

@@ -38,7 +38,7 @@ def test_beta_draws_match_scipy_and_a_wrong_parameter_fails(a, b):
     # so the ends are allowed, but only as often as that rounding explains
     assert np.all((x >= 0) & (x <= 1))
     near = max(a, b) * 2.0 ** -24  # generous: the mass within one ulp of either end
-    assert np.mean((x == 0) | (x == 1)) <= 10 * near + 10 / x.size
+    assert np.mean((x == 0) | (x == 1)) <= 10 * near + 3 / x.size
     assert st.kstest(x, st.beta(a, b).cdf).pvalue > 1e-3
     # control: a 10% larger first parameter is detected by the same test on the same draws
     assert st.kstest(x, st.beta(a * 1.1, b).cdf).pvalue < 1e-3
@@ -316,8 +316,20 @@ def test_readme_quotes_the_lead_idle_thompson_runs():
               f"NumPy's {m(npy)} in the same process; `run_seeds` with per-seed arrays "
               f"{m(per_seed)} (" + ", ".join(f"{p / n:.1f}×" for p, n in zip(per_seed, npy))
               + ")")
-    quoted = quoted.replace("M and 0.22M in", "M and 0.22M in")
     assert quoted in text, quoted
     slow = min(per_seed) / 0.25e6
     assert f"slowest `run_seeds` run would be {slow:.1f}×" in text
     assert f"the slowest best path {min(best) / 0.25e6:.1f}×" in text
+
+
+def test_expm1_is_exact_enough_in_float64_and_float32():
+    """prng._expm1: in float64 it must be jnp.expm1 (the float32 Taylor branch truncates at
+    ~1e-9 relative, which the KS tests cannot see); in float32 within its documented error."""
+    y64 = np.concatenate([-np.logspace(-12, 1, 200), np.logspace(-12, -1.3, 50)])
+    with jax.enable_x64():
+        y = jnp.asarray(y64, jnp.float64)
+        got = np.asarray(prng._expm1(y, jnp.exp(y)))
+    assert got.dtype == np.float64 and np.max(np.abs(got / np.expm1(y64) - 1)) < 1e-14
+    y32 = y64.astype(np.float32)
+    got = np.asarray(prng._expm1(jnp.asarray(y32), jnp.exp(jnp.asarray(y32))), np.float64)
+    assert np.max(np.abs(got / np.expm1(y32.astype(np.float64)) - 1)) < 2e-6

@@ -327,3 +327,40 @@ def test_readme_quotes_the_lead_strong_run_at_0787e20():
     old = json.loads((folder.parent / "single_command_h100" / "strong.json").read_text())
     for field in ("lowvar_eval", "paper_eval", "explore_success"):
         assert np.array_equal(np.asarray(run[field])[0], np.asarray(old[field])[0]), field
+
+
+def test_lower_priority_renices_only_the_calling_thread_on_many_cores(monkeypatch):
+    """context.lower_priority: on a host with >= BACKGROUND_NICE_MIN_CORES usable cores it
+    sets the calling thread's niceness to BACKGROUND_NICE and leaves the main thread alone;
+    on fewer cores (the 2-core machine) it does nothing."""
+    import os
+    import sys
+    import threading
+
+    import pytest
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("per-thread niceness is a Linux feature")
+    main_tid = threading.get_native_id()
+    main_before = os.getpriority(os.PRIO_PROCESS, main_tid)
+
+    def niceness_after_call(cores):
+        monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: set(range(cores)))
+        seen = []
+
+        def body():
+            tid = threading.get_native_id()
+            before = os.getpriority(os.PRIO_PROCESS, tid)
+            context.lower_priority()
+            seen.append((before, os.getpriority(os.PRIO_PROCESS, tid)))
+
+        t = threading.Thread(target=body)
+        t.start()
+        t.join()
+        return seen[0]
+
+    before, after = niceness_after_call(context.BACKGROUND_NICE_MIN_CORES - 1)
+    assert after == before  # few cores: left off
+    before, after = niceness_after_call(context.BACKGROUND_NICE_MIN_CORES)
+    assert after == max(before, context.BACKGROUND_NICE)
+    assert os.getpriority(os.PRIO_PROCESS, main_tid) == main_before  # main thread untouched

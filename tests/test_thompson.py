@@ -259,8 +259,8 @@ def test_readme_quotes_the_8b9124f_bench_files():
     paired = (bench / "bandit_thompson_1core_paired.txt").read_text()
     head, old = re.findall(r"([0-9.]+)M per CPU-second", paired)
     for quoted in (
-            f"17:59 UTC at load {loads([quiet])}: `run_seeds` {rs / 1e6:.2f}M seed-rounds/s, "
-            f"{rs / npy:.1f}× NumPy's {npy / 1e6:.2f}M in the same process",
+            (f"17:59 UTC at load {loads([quiet])}: `run_seeds` {rs / 1e6:.2f}M seed-rounds/s, "
+             f"{rs / npy:.1f}× NumPy's {npy / 1e6:.2f}M in the same process"),
             f"at load {loads(loaded)} (other engineers' jobs): best path "
             + ", ".join(f"{r['seed_rounds_per_s'] / 1e6:.2f}M" for r in loaded[:2])
             + f" and {loaded[2]['seed_rounds_per_s'] / 1e6:.2f}M, "

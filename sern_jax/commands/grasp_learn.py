@@ -608,12 +608,13 @@ def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
     table = format_table(res["table"])
     io.save_text(out / "table.md", table + "\n")
     t = res["timings"]
-    total = sum(t.values()) or 1.0
-    split = ", ".join(f"{k} {v:.0f} s ({100 * v / total:.0f}%)" for k, v in t.items())
+    split = ", ".join(f"{k} {v:.0f} s" for k, v in t.items())
     n = res["trial_counts"]
     shared = (f" Trials: {n['simulated']:,} simulated for {n['requested']:,} policy "
               "grasps (policies that pick the same grasp on the same pose share its "
               "trial: common random numbers)." if n["requested"] else "")
     io.save_text(out / "report.md",
-                 f"# Online grasp learning\n\n{table}\n\nWall time {seconds:.0f} s; where it "
-                 f"went: {split}.{shared}\n")
+                 f"# Online grasp learning\n\n{table}\n\nWall time {seconds:.0f} s. Time in each "
+                 f"phase (a round's evaluation runs beside the next round's exploration, "
+                 f"so they overlap; wait: the main thread waiting for an evaluation): "
+                 f"{split}.{shared}\n")

@@ -61,10 +61,12 @@ __all__ = [
     "pose_seeds",
     "make_context",
     "make_contexts",
+    "resting_poses",
     "scene_model",
     "copy_model",
     "context_threads",
     "lower_priority",
+    "many_cores",
 ]
 
 POSE_STREAM = 0  # fold_in id: resting-pose seed
@@ -261,6 +263,15 @@ BACKGROUND_NICE = 10  # niceness of the context threads (made ahead of need)
 BACKGROUND_NICE_MIN_CORES = 8  # ... on hosts with at least this many usable cores
 
 
+def many_cores() -> bool:
+    """Whether this process may use at least ``BACKGROUND_NICE_MIN_CORES`` cores: where
+    work made ahead of need runs at a lower priority (:func:`lower_priority`)."""
+    try:
+        return len(os.sched_getaffinity(0)) >= BACKGROUND_NICE_MIN_CORES
+    except AttributeError:
+        return (os.cpu_count() or 1) >= BACKGROUND_NICE_MIN_CORES
+
+
 def lower_priority() -> None:
     """Lowers the calling thread's CPU priority to niceness ``BACKGROUND_NICE`` (Linux: a
     thread's own niceness; elsewhere, or if refused, nothing happens) on a host with at
@@ -272,7 +283,7 @@ def lower_priority() -> None:
     the shared 2-core machine at load ~5, a run with it saved round 1 at 210 s against the
     code before's 121 s; suspected, not isolated). Scheduling only: results are the same."""
     try:
-        if len(os.sched_getaffinity(0)) < BACKGROUND_NICE_MIN_CORES:
+        if not many_cores():
             return
         tid = threading.get_native_id()
         current = os.getpriority(os.PRIO_PROCESS, tid)
@@ -347,10 +358,13 @@ def _contexts(
     keys: jax.Array,
     model: mujoco.MjModel,
     config: ContextConfig,
+    poses: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, depth_lib.CameraParams, cand_lib.Candidates]:
-    """Poses, depth, camera and candidates for context keys [P] in one scene."""
+    """Poses, depth, camera and candidates for context keys [P] in one scene (``poses``:
+    the keys' resting poses where already settled, :func:`resting_poses`)."""
     seeds, keys_noise, keys_cand = _streams(keys)
-    poses = _resting_poses(model, np.asarray(seeds), config)
+    if poses is None:
+        poses = _resting_poses(model, np.asarray(seeds), config)
     params = depth_lib.overhead_params(config.camera)
     if _renderer(config) == "native":
         # MuJoCo's C ray caster: the same image as depth.render (tests compare them) with
@@ -402,12 +416,27 @@ def make_context(
     )
 
 
+def resting_poses(
+    key: jax.Array,
+    num_poses: int,
+    model: mujoco.MjModel,
+    config: ContextConfig = ContextConfig(),
+) -> np.ndarray:
+    """The resting poses [P, 7] of ``make_contexts(key, spec, num_poses, config, model)``:
+    the batch's first stage (native MuJoCo on the CPU), so that a caller can settle poses
+    ahead of rendering them and pass them back as ``make_contexts(..., poses=)``."""
+    _check_key(key)
+    seeds = _streams(_keys(key, int(num_poses)))[0]
+    return _resting_poses(model, np.asarray(seeds), config)
+
+
 def make_contexts(
     key: jax.Array,
     spec: objects_lib.ObjectSpec,
     num_poses: int,
     config: ContextConfig = ContextConfig(),
     model: mujoco.MjModel | None = None,
+    poses: np.ndarray | None = None,
 ) -> GraspContexts:
     """``num_poses`` grasp contexts of one object, rendered and sampled in one batch.
 
@@ -422,6 +451,9 @@ def make_contexts(
       model: optional scene of ``spec`` to reuse (``scene_model(spec, config)`` or a
         ``scene.build_scene`` result; not modified). None builds ``scene_model``. Its
         qpos0 is no particular pose: give the simulator ``poses[i]`` as ``object_pose``.
+      poses: optional [P, 7] ``resting_poses(key, num_poses, model, config)``, settled
+        ahead (the contexts are then the same as without it, bit for bit); None settles
+        them here.
 
     Returns:
       GraspContexts(model [shared], poses [P, 7], depth [P, H, W], camera, candidates
@@ -443,7 +475,12 @@ def make_contexts(
         raise ValueError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
     else:
         scene_lib.scene_ids(model)  # raises if it is not a grasp scene
-    poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config)
+    if poses is not None:
+        poses = np.asarray(poses)
+        if poses.shape != (num_poses, 7) or not np.all(np.isfinite(poses)):
+            raise ValueError(f"poses must be finite with shape ({num_poses}, 7) (resting_poses"
+                             f" of the same key), got shape {poses.shape}")
+    poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config, poses)
     return GraspContexts(
         model=model, poses=poses, depth=depth, camera=camera, candidates=cands
     )

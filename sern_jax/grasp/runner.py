@@ -21,6 +21,14 @@ one jitted call vmapped over the O × S copies (learners with the same update sh
 compile); contexts, crops and trials are shared by the learners. Physics runs on the native
 MuJoCo backend (CPU) or MJX.
 
+Overlap: round r's evaluation needs only the states after round r's update, and round r + 1's
+exploration needs the same states and nothing the evaluation makes, so the evaluation runs in
+a thread of its own while the main thread explores and updates round r + 1 (their trials share
+the native trial workers, their forward passes the device). Every output is keyed by stream,
+pose and grasp, never by order, so the results are those of running the phases one after
+another, bit for bit (tests/grasp/test_runner.py). The checkpoint is written when a round's
+evaluation ends and holds that round and the ones before it only.
+
 Common random numbers: within a seed, every learner sees the same poses, the same candidate
 sets, the same inverse-CDF uniform and the same trial randomisation (friction, mass,
 execution error), so comparisons are paired. Keys: object ``o`` (by name, CRC32) and seed
@@ -36,6 +44,7 @@ import dataclasses
 import functools
 import hashlib
 import json
+import threading
 import time
 import zlib
 from collections.abc import Callable
@@ -311,10 +320,18 @@ def _fold_streams(keys, stream, round_index):
     return jax.vmap(jax.vmap(lambda k: _stream(k, stream, round_index)))(keys)
 
 
-def _contexts_of_stream(key_os, stream, r, *args):
+def _poses_of_stream(key_os, stream, r, num, model, config):
+    """``context.resting_poses`` of ``_stream(key_os, stream, r)``: a batch's settling
+    stage, in a settling thread."""
+    return context_lib.resting_poses(_stream(key_os, stream, r), num, model, config)
+
+
+def _contexts_of_stream(key_os, stream, r, spec, num, model, config, settled=None):
     """:func:`_contexts` of ``_stream(key_os, stream, r)``, the key derived in the calling
-    (batch) thread rather than by the main thread that queues the batch."""
-    return _contexts(_stream(key_os, stream, r), *args)
+    (batch) thread rather than by the main thread that queues the batch; ``settled``: a
+    future of the batch's resting poses (:func:`_poses_of_stream`), waited for here."""
+    poses = None if settled is None else settled.result()
+    return _contexts(_stream(key_os, stream, r), spec, num, model, config, poses)
 
 
 # ----------------------------------------------------------------------------- jitted steps
@@ -478,9 +495,10 @@ def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _contexts(key, spec, num, model, config=context_lib.ContextConfig()):
-    """Contexts of one object as numpy (poses [n, 7], depth [n, H, W], candidates [n, K])."""
-    ctx = context_lib.make_contexts(key, spec, num, config, model=model)
+def _contexts(key, spec, num, model, config=context_lib.ContextConfig(), poses=None):
+    """Contexts of one object as numpy (poses [n, 7], depth [n, H, W], candidates [n, K]);
+    ``poses``: their resting poses where settled ahead."""
+    ctx = context_lib.make_contexts(key, spec, num, config, model=model, poses=poses)
     return ctx.poses, ctx.depth, ctx.candidates
 
 
@@ -557,10 +575,22 @@ def _run_trials(simulators, grasps, poses, noise_keys, n_per_key, counts=None):
     else:
         done = [one(o) for o in range(num_o)]
     if counts is not None:
-        for requested, simulated in done:
-            counts["requested"] = counts.get("requested", 0) + requested
-            counts["simulated"] = counts.get("simulated", 0) + simulated
+        with _COUNTS_LOCK:  # the evaluation thread and the main thread both count
+            for requested, simulated in done:
+                counts["requested"] = counts.get("requested", 0) + requested
+                counts["simulated"] = counts.get("simulated", 0) + simulated
     return out
+
+
+_COUNTS_LOCK = threading.Lock()
+
+# Whether a round's evaluation runs beside the next round's exploration (the module
+# docstring); False runs the phases one after another (the reference the tests compare with:
+# the same results and checkpoints, bit for bit).
+OVERLAP_EVALUATION = True
+# Whether every batch's resting poses are queued to settle when the run starts (see run);
+# None: on a many-core host (context.many_cores), the other behaviour elsewhere.
+SETTLE_AHEAD: bool | None = None
 
 
 @functools.lru_cache(maxsize=1)
@@ -677,7 +707,7 @@ def run(
     results = RoundResults(np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan),
                            np.full(shape + (num_e,), -1, np.int32), np.full(shape, np.nan))
     rewards = np.zeros((num_r + 1, num_o, num_s, num_q, num_e), np.int8)  # per grasp
-    timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate")}
+    timings = {k: 0.0 for k in ("contexts", "choose", "trials", "update", "evaluate", "wait")}
     if config.regret_trials:
         timings["oracle"] = 0.0
     trial_counts = {"requested": 0, "simulated": 0}  # this invocation (not resumed rounds)
@@ -695,27 +725,65 @@ def run(
         log(f"resuming {out_dir} at round {start_round}")
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    # Every (object, seed)'s batch of contexts is made in a thread of its own (MuJoCo's
+    # Every (object, seed)'s batch of contexts is made in threads of its own (MuJoCo's
     # settling and ray casting and JAX's sampler release the GIL; each batch has its own
     # MjData and keys, the models are only read), so the batches of a round use the cores
-    # instead of one. The threads' name starts with "sern-context", so each batch settles its
-    # poses in its own thread (context._resting_poses) rather than in a nested pool. They
-    # run at a lower CPU priority (context.lower_priority): they are made ahead of need, and
-    # the main thread (compiles, the learners' dispatch) and the trial workers come first.
+    # instead of one. A batch is made in two stages: its resting poses settle (native
+    # MuJoCo, CPU only) in a settling thread, then a batch thread renders the depth images
+    # and samples the candidates (the device, and on a GPU one compile per object and batch
+    # size). The threads' names start with "sern-context", so a batch settles its poses in
+    # its own thread (context._resting_poses) rather than in a nested pool. The settling
+    # threads run at a lower CPU priority (context.lower_priority, on a many-core host):
+    # they work ahead of need, and the main thread, the evaluation, the trial workers and
+    # the compiles come first. On a many-core host (context.many_cores) every batch's poses
+    # are queued to settle when the run starts, in the order the run queues the batches, so
+    # the settling threads fill the cores that the first compiles leave idle and later
+    # rounds only render; elsewhere a batch's poses are queued with the batch. Same keys,
+    # same poses: results unchanged.
+    threads = max(1, min(num_o * num_s, context_lib.context_threads()))
     batches = concurrent.futures.ThreadPoolExecutor(
-        max(1, min(num_o * num_s, context_lib.context_threads())),
-        thread_name_prefix="sern-context-batch", initializer=context_lib.lower_priority)
+        threads, thread_name_prefix="sern-context-batch")
+    settlers = concurrent.futures.ThreadPoolExecutor(
+        threads, thread_name_prefix="sern-context-settle",
+        initializer=context_lib.lower_priority)
+    settling = {}  # (stream, r) -> [O][S] futures of resting poses [N, 7]
+
+    def settle(stream, r, num):
+        if (stream, r) not in settling:
+            settling[(stream, r)] = [
+                [settlers.submit(_poses_of_stream, keys_os[o][s], stream, r, num, models[o],
+                                 context_config) for s in range(num_s)] for o in range(num_o)]
 
     def submit_contexts(stream, r, num):
+        settle(stream, r, num)
+        settled = settling.pop((stream, r))
         return [[batches.submit(_contexts_of_stream, keys_os[o][s], stream, r, specs[o], num,
-                                models[o], context_config) for s in range(num_s)]
-                for o in range(num_o)]
+                                models[o], context_config, settled[o][s])
+                 for s in range(num_s)] for o in range(num_o)]
 
     def gather(jobs):
         return _stack_contexts([[job.result() for job in row] for row in jobs])
 
+    # The order the batches are queued in (and, on a many-core host, their poses settled
+    # in, all at the start): the fixed low-variance evaluation poses, round 0's evaluation
+    # contexts, round 1's exploration contexts, then each round's evaluation and the next
+    # round's exploration contexts as soon as the round's exploration contexts are taken
+    # (a resumed run: its replay's exploration contexts before). On a GPU each batch size of
+    # each object is a compile of its own, made in that order, so the evaluations, the
+    # longer chain of the two threads, start first.
+    need = [(LOWVAR_CONTEXT, 0, config.eval_poses)] if config.eval_poses else []
+    need += ([(EVAL_CONTEXT, 0, config.evaluate)] if start_round == 0 else []) + [
+        (EXPLORE_CONTEXT, r, num_e) for r in range(1, max(start_round, 1) + 1)]
+    for r in range(max(start_round, 1), num_r + 1):
+        need += [(EVAL_CONTEXT, r, config.evaluate), (EXPLORE_CONTEXT, r + 1, num_e)]
+    ahead = context_lib.many_cores() if SETTLE_AHEAD is None else SETTLE_AHEAD
+    if ahead and start_round <= num_r:  # (a finished run needs none)
+        for stream, r, num in need:
+            if r <= num_r:
+                settle(stream, r, num)
+
     # The fixed low-variance evaluation poses of each (object, seed): queued first, gathered
-    # when round 0's evaluation (or a resumed round's) needs them.
+    # when the first evaluation needs them.
     lowvar_jobs = (submit_contexts(LOWVAR_CONTEXT, 0, config.eval_poses)
                    if config.eval_poses else None)
     lowvar_made = []
@@ -737,28 +805,39 @@ def run(
             axis=2)  # [O, S, Q, N]
 
     # Contexts (resting-pose drops, rendering, candidates) are made ahead of need in the
-    # batch threads while the main thread runs trials and the learners: a round's evaluation
-    # contexts and the next round's exploration contexts are queued (in that order) as soon
-    # as the round's exploration contexts are taken. They depend on their keys only, so
-    # results are unchanged; the simulators run on copies of the scene models and only read
-    # them.
+    # batch threads while the main thread runs trials and the learners, in the order above.
+    # They depend on their keys only, so results are unchanged; the simulators run on
+    # copies of the scene models and only read them.
     pending = {}
+    streams = {"explore": EXPLORE_CONTEXT, "eval": EVAL_CONTEXT}
+    sizes = {"explore": num_e, "eval": config.evaluate}
 
     def prefetch(kind, r):
         if r <= num_r and (kind, r) not in pending:
-            stream, num = {"explore": (EXPLORE_CONTEXT, num_e),
-                           "eval": (EVAL_CONTEXT, config.evaluate)}[kind]
-            pending[(kind, r)] = submit_contexts(stream, r, num)  # poses [O, S, N, 7]
+            pending[(kind, r)] = submit_contexts(streams[kind], r, sizes[kind])  # [O, S, N]
 
-    def contexts(kind, r):
-        t = time.perf_counter()
+
+    timing_lock = threading.Lock()  # the evaluation thread adds to timings too
+
+    def tick(phase, t):
+        with timing_lock:
+            timings[phase] += time.perf_counter() - t
+
+    def take(kind, r):
+        """The queued context jobs of (kind, r) (queued now if they were not)."""
         prefetch(kind, r)
-        out = gather(pending.pop((kind, r)))
-        timings["contexts"] += time.perf_counter() - t
+        return pending.pop((kind, r))
+
+    def contexts(kind, r, jobs=None):
+        t = time.perf_counter()
+        out = gather(take(kind, r) if jobs is None else jobs)
+        tick("contexts", t)
         return out
 
-    def evaluate(r, states):
-        poses, depth, cands = contexts("eval", r)
+    def evaluate(r, states, jobs):
+        """Round r's evaluation of ``states`` (a list of the learners' states after round
+        r's update) on the contexts of ``jobs``; runs in the evaluation thread."""
+        poses, depth, cands = contexts("eval", r, jobs)
         t = time.perf_counter()
         u = np.asarray(jax.vmap(jax.vmap(lambda k: jax.random.uniform(k, (config.evaluate,))))(
             _stream_keys(keys_arr, EVAL_UNIFORM, r)))
@@ -769,7 +848,7 @@ def run(
                               config.evaluate, trial_counts)
         success &= action >= 0
         results.paper_eval[r] = success.mean(-1).transpose(0, 2, 1)
-        if lowvar_jobs is not None:
+        if config.eval_poses:
             poses, depth, cands, crops = lowvar_contexts()
             u0 = np.zeros(poses.shape[:3], np.float32)
             action = greedy_actions(states, crops, cands, u0)  # [O, S, Q, P]
@@ -784,20 +863,43 @@ def run(
             success = success.reshape(num_o, num_s, num_q, config.eval_poses, m)
             success &= (action >= 0)[..., None]
             results.lowvar_eval[r] = success.mean((-1, -2)).transpose(0, 2, 1)
-        timings["evaluate"] += time.perf_counter() - t
+        tick("evaluate", t)
+
+    # The evaluations run one after another in a thread of their own, beside the main
+    # thread's exploration (module docstring); each saves the checkpoint through its round.
+    evaluator = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="sern-evaluate")
+    queued = []  # futures of the evaluations queued and not yet waited for, in round order
+
+    def evaluate_and_save(r, states, jobs):
+        evaluate(r, states, jobs)
+        _save(ckpt, fingerprint, *_through(results, rewards, r + 1), r + 1)
+        bar.update(1)
+        if not progress:  # a line per round where there is no bar (device logs)
+            log(f"round {r}/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
+                + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
+
+    def queue_evaluation(r):
+        queued.append(evaluator.submit(evaluate_and_save, r, list(states), take("eval", r)))
+        if not OVERLAP_EVALUATION:
+            wait_evaluations()
+
+    def wait_evaluations():
+        t = time.perf_counter()
+        while queued:
+            queued.pop(0).result()
+        tick("wait", t)
+
+    def raise_failed_evaluation():
+        """A queued evaluation's error, raised in the main thread as soon as it is known."""
+        for job in queued:
+            if job.done() and job.exception() is not None:
+                job.result()
 
     if start_round == 0:
-        # round 0's evaluation contexts before round 1's exploration contexts (4x as many in
-        # the default setting): the evaluation waits for its own only
         prefetch("eval", 0)
         prefetch("explore", 1)
-        evaluate(0, states)
-        _save(ckpt, fingerprint, results, rewards, 1)
+        queue_evaluation(0)
         start_round = 1
-        bar.update(1)
-        if not progress:
-            log(f"round 0/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
-                + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
 
     def explore_contexts(r):
         out = contexts("explore", r)
@@ -830,7 +932,8 @@ def run(
                        results.explore_action[r].transpose(0, 2, 1, 3), rewards[r] > 0)
         log(f"replayed rounds 1..{start_round - 1} in {time.perf_counter() - t:.1f} s")
 
-    for r in range(start_round, num_r + 1):
+    def explore_round(r):
+        raise_failed_evaluation()
         # 1. exploration
         poses, depth, cands = explore_contexts(r)
         t = time.perf_counter()
@@ -875,15 +978,30 @@ def run(
             timings["oracle"] += time.perf_counter() - t
         # 2. update on the phase's (crop, action, reward)
         update_all(r, crops, action, success)
-        # 3. evaluation
-        evaluate(r, states)
-        _save(ckpt, fingerprint, results, rewards, r + 1)
-        bar.update(1)
-        if not progress:  # a line per round where there is no bar (device logs)
-            log(f"round {r}/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
-                + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
-    bar.close()
-    batches.shutdown(wait=False, cancel_futures=True)
+        # 3. evaluation, in the evaluation thread
+        queue_evaluation(r)
+
+    try:
+        for r in range(start_round, num_r + 1):
+            explore_round(r)
+        wait_evaluations()
+    except BaseException as err:
+        # Keep the rounds already explored: their evaluations finish and save their
+        # checkpoints (on an interrupt, only the one running: the others are dropped).
+        for job in queued:
+            if isinstance(err, KeyboardInterrupt):
+                job.cancel()
+            else:
+                try:
+                    job.result()
+                except Exception:  # the evaluation failed too: the first error is raised
+                    pass
+        raise
+    finally:
+        evaluator.shutdown(wait=False, cancel_futures=True)
+        bar.close()
+        batches.shutdown(wait=False, cancel_futures=True)
+        settlers.shutdown(wait=False, cancel_futures=True)
     rows = table_rows(names, config.policies, results.paper_eval,
                       results.lowvar_eval if config.eval_poses else None,
                       results.pseudo_regret if config.regret_trials else None)
@@ -919,8 +1037,9 @@ def _oracle(simulators, cands, poses, num_trials, noise_keys, counts):
             sim_lib.TrialNoise(*(a[rows_s, rows_t] for a in noise)),
             object_pose=np.repeat(np.asarray(poses[o])[s_i, n_i], m, axis=0))
         out[o][s_i, n_i, k_i] = res.success.reshape(-1, m).mean(1)
-        counts["requested"] += len(rows_s)
-        counts["simulated"] += len(rows_s)
+        with _COUNTS_LOCK:  # the evaluation thread counts too
+            counts["requested"] += len(rows_s)
+            counts["simulated"] += len(rows_s)
     return out
 
 
@@ -977,6 +1096,21 @@ def _state_from_arrays(saved: dict, prefix: str, template: lbase.LearnerState,
     return loaded._replace(buffer=lb._replace(
         inputs=tuple(full(d, t) for d, t in zip(lb.inputs, buf.inputs)),
         reward=full(lb.reward, buf.reward), weight=full(lb.weight, buf.weight)))
+
+
+def _through(results: RoundResults, rewards: np.ndarray, next_round: int):
+    """Copies of ``results`` and ``rewards`` holding rounds ``< next_round`` only, later
+    rounds at their initial fill (NaN, action -1, reward 0): what the checkpoint of a run
+    that has finished those rounds holds, whatever the main thread has done since."""
+    def cut(a, fill):
+        a = np.array(a, copy=True)
+        a[next_round:] = fill
+        return a
+
+    fills = {"explore_action": -1}
+    return (RoundResults(*(cut(getattr(results, f), fills.get(f, np.nan))
+                           for f in RoundResults._fields)),
+            cut(rewards, 0))
 
 
 def _save(path, fingerprint, results, rewards, next_round):

@@ -364,3 +364,33 @@ def test_lower_priority_renices_only_the_calling_thread_on_many_cores(monkeypatc
     before, after = niceness_after_call(context.BACKGROUND_NICE_MIN_CORES)
     assert after == max(before, context.BACKGROUND_NICE)
     assert os.getpriority(os.PRIO_PROCESS, main_tid) == main_before  # main thread untouched
+
+
+def test_poses_settled_ahead_give_the_same_contexts_bit_for_bit():
+    """context.resting_poses is make_contexts' first stage: contexts made from poses settled
+    ahead (the runner's settling threads) equal the ones made in one go; poses of another
+    key or shape are refused."""
+    spec = objects.sample_population(3, 2)[1]
+    config = context.ContextConfig(renderer="native")
+    model = context.scene_model(spec, config)
+    key = jax.random.key(5)
+    whole = _arrays(context.make_contexts(key, spec, 4, config, model=model))
+    poses = context.resting_poses(key, 4, model, config)
+    staged = _arrays(context.make_contexts(key, spec, 4, config, model=model, poses=poses))
+    for k in whole:
+        assert whole[k].dtype == staged[k].dtype and whole[k].tobytes() == staged[k].tobytes(), k
+    # control: another key's poses give other contexts (the poses are really used)
+    other = context.resting_poses(jax.random.key(6), 4, model, config)
+    moved = _arrays(context.make_contexts(key, spec, 4, config, model=model, poses=other))
+    assert not np.array_equal(moved["poses"], whole["poses"])
+    assert not np.array_equal(moved["depth"], whole["depth"])
+    with np.testing.assert_raises_regex(ValueError, r"poses must be finite with shape \(4, 7\)"):
+        context.make_contexts(key, spec, 4, config, model=model, poses=poses[:3])
+
+
+def test_many_cores_follows_the_usable_cores(monkeypatch):
+    import os
+
+    for cores, want in ((2, False), (context.BACKGROUND_NICE_MIN_CORES, True)):
+        monkeypatch.setattr(os, "sched_getaffinity", lambda _pid, n=cores: set(range(n)))
+        assert context.many_cores() is want

@@ -41,23 +41,84 @@ def spec():
     return objects.make_object(OBJECT)
 
 
-@pytest.fixture(scope="module")
-def run_a(tiny_theta0, spec, tmp_path_factory):
-    """An uninterrupted run; the checkpoint after round 1 is copied aside."""
-    out = tmp_path_factory.mktemp("learn_a")
-    aside = tmp_path_factory.mktemp("aside") / "checkpoint_round1.npz"
-    real = runner._save
+def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahead=True):
+    """runner.run, keeping a copy of the checkpoint as saved after each round: (result,
+    {next_round: path of the copy}). ``overlap``: each round's evaluation beside the next
+    round; ``settle_ahead``: every batch's resting poses queued at the start (both what a
+    many-core host does; here forced, on any host)."""
+    real, kept = runner._save, {}
 
     def save_and_copy(path, *args):
         real(path, *args)
-        if args[-1] == 2:  # next_round = 2: round 1 finished
-            shutil.copy(path, aside)
+        kept[args[-1]] = out.parent / f"{out.name}_checkpoint_{args[-1]}.npz"
+        shutil.copy(path, kept[args[-1]])
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(runner, "_save", save_and_copy)
-        res = runner.run(CONFIG, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
-    assert aside.exists()
-    return res, out, aside
+        mp.setattr(runner, "OVERLAP_EVALUATION", overlap)
+        mp.setattr(runner, "SETTLE_AHEAD", settle_ahead)
+        res = runner.run(config, [spec], out, theta0=theta0, progress=False, log=_quiet)
+    return res, kept
+
+
+@pytest.fixture(scope="module")
+def run_a_checkpoints(tiny_theta0, spec, tmp_path_factory):
+    """An uninterrupted run (each round's evaluation beside the next round, every batch's
+    poses settled ahead) and its checkpoint after each round."""
+    out = tmp_path_factory.mktemp("learn_a") / "run"
+    return (out,) + _run_keeping_checkpoints(CONFIG, spec, out, tiny_theta0)
+
+
+@pytest.fixture(scope="module")
+def run_a(run_a_checkpoints):
+    """An uninterrupted run; the checkpoint after round 1."""
+    out, res, kept = run_a_checkpoints
+    assert sorted(kept) == list(range(1, CONFIG.rounds + 2))  # saved after every round
+    return res, out, kept[2]  # next_round = 2: round 1 finished
+
+
+def test_evaluation_beside_the_next_round_changes_nothing(run_a_checkpoints, tiny_theta0,
+                                                          spec, tmp_path):
+    """Round r's evaluation runs beside round r + 1's exploration and update, and every
+    batch's poses settle ahead; run one phase after another, each batch settled when it is
+    made, instead, and every result, every checkpoint after every round (it holds that
+    round and the ones before it only) and the learners' final states are the same bits."""
+    _, res, kept = run_a_checkpoints
+    serial, serial_kept = _run_keeping_checkpoints(CONFIG, spec, tmp_path / "serial",
+                                                   tiny_theta0, overlap=False,
+                                                   settle_ahead=False)
+    for name in res["results"]._fields:
+        np.testing.assert_array_equal(getattr(res["results"], name),
+                                      getattr(serial["results"], name), err_msg=name)
+    assert sorted(kept) == sorted(serial_kept)
+    for next_round in kept:
+        a, b = io.load_npz(kept[next_round]), io.load_npz(serial_kept[next_round])
+        assert sorted(a) == sorted(b)
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=(next_round, name))
+        # rounds from next_round on are not in it (control: the final results have them)
+        if next_round <= CONFIG.rounds:
+            assert (a["explore_action"][next_round:] == -1).all()
+            assert (res["results"].explore_action[next_round:] >= 0).all()
+    for q in range(len(CONFIG.policies)):
+        for got, want in zip(jax.tree.leaves(res["states"][q]),
+                             jax.tree.leaves(serial["states"][q])):
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert res["trial_counts"] == serial["trial_counts"]
+
+
+def test_through_keeps_earlier_rounds_only():
+    shape = (4, 1, 2, 3)
+    results = runner.RoundResults(*(np.full(shape, 0.5) for _ in range(3)),
+                                  np.full(shape + (5,), 7, np.int32), np.full(shape, 2.0))
+    rewards = np.ones((4, 1, 3, 2, 5), np.int8)
+    cut, cut_rewards = runner._through(results, rewards, 2)
+    for name in ("paper_eval", "lowvar_eval", "explore_success", "pseudo_regret"):
+        got = getattr(cut, name)
+        assert np.isnan(got[2:]).all() and (got[:2] == getattr(results, name)[:2]).all()
+    assert (cut.explore_action[2:] == -1).all() and (cut.explore_action[:2] == 7).all()
+    assert (cut_rewards[2:] == 0).all() and (cut_rewards[:2] == 1).all()
+    assert (results.explore_action == 7).all() and (rewards == 1).all()  # inputs untouched
 
 
 def test_tiny_run_table(run_a):
@@ -88,7 +149,8 @@ def test_tiny_run_table(run_a):
     saved = io.load_npz(out / "checkpoint.npz")
     assert int(saved["next_round"]) == CONFIG.rounds + 1
     assert str(saved["fingerprint"]) == res["fingerprint"]
-    assert set(res["timings"]) == {"contexts", "choose", "trials", "update", "evaluate"}
+    assert set(res["timings"]) == {"contexts", "choose", "trials", "update", "evaluate",
+                                   "wait"}
     # regret accounting is off by default: NaN, and no regret in the table
     assert np.isnan(results.pseudo_regret).all()
     assert all("pseudo_regret" not in r for r in table)
@@ -619,6 +681,9 @@ def test_learner_returning_no_grasp_stops_the_run(tiny_theta0, spec, tmp_path):
                              r"triangular_prism, seed 0, round 1, grasp 0 while \d+ "):
         runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet,
                    learners={"greedy": _uniform_learner(no_arm=True)})
+    # round 0's evaluation was running beside round 1 when it stopped: it was kept
+    saved = io.load_npz(tmp_path / "checkpoint.npz")
+    assert int(saved["next_round"]) == 1 and np.isfinite(saved["paper_eval"][0]).all()
 
 
 def _registered_flags():

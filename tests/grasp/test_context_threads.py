@@ -394,3 +394,43 @@ def test_many_cores_follows_the_usable_cores(monkeypatch):
     for cores, want in ((2, False), (context.BACKGROUND_NICE_MIN_CORES, True)):
         monkeypatch.setattr(os, "sched_getaffinity", lambda _pid, n=cores: set(range(n)))
         assert context.many_cores() is want
+
+
+def test_readme_quotes_the_lead_strong_run_at_cbeac03():
+    """The lead's one-command strong run at cbeac03 (under 4 minutes): the README row's
+    figures recomputed from the committed record, and its round 0 equal to the first
+    one-command run's in every cell."""
+    import json
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    folder = root / "experiments" / "results" / "strong" / "single_command_h100_cbeac03"
+    readme = " ".join((root / "README.md").read_text().split())
+    run = json.loads((folder / "strong.json").read_text())
+    n = run["trial_counts"]
+    wall = float(re.search(r"wall ([\d.]+) rc 0", (folder / "context.txt").read_text()).group(1))
+    assert run["seeds"] == 20 and run["rounds_done"] == 5 and wall <= 240
+    assert run["machine"]["jax_backend"] == "gpu" and run["machine"]["cpu_count"] == 16
+    log = (folder / "log.txt").read_text()
+    saved = {int(r): int(t) for r, t in re.findall(r"round (\d)/5 saved at (\d+) s", log)}
+    time_v = (folder / "time_v.txt").read_text()
+    cpu = sum(float(re.search(rf"{k} time \(seconds\): ([\d.]+)", time_v).group(1))
+              for k in ("User", "System"))
+    quoted = (f"**{wall:.0f} s** for the command ({run['seconds']:.0f} s in the run; round 0 "
+              f"saved at {saved[0]} s, round 5 at {saved[5]} s; {n['simulated']:,} trials "
+              f"simulated; {cpu:,.0f} CPU-seconds, {cpu / wall:.1f} of 16 cores on average): "
+              "**under the 4-minute goal**")
+    assert quoted in readme, quoted
+    assert f"**The strong setting now takes {wall:.0f} s on the H100 machine (cbeac03)" in readme
+    old = json.loads((folder.parent / "single_command_h100" / "strong.json").read_text())
+    differ = {}
+    for field in ("lowvar_eval", "paper_eval", "explore_success"):
+        new_f = np.asarray(run[field], float)
+        old_f = np.asarray(old[field], float)
+        assert np.array_equal(new_f[0], old_f[0], equal_nan=True), field
+        differ[field] = int((~((new_f == old_f) | (np.isnan(new_f) & np.isnan(old_f)))).sum())
+    assert 0 < sum(differ.values())  # control: the comparison sees differences
+    assert (f"Its later rounds differ in {differ['lowvar_eval']} low-variance, "
+            f"{differ['paper_eval']} five-grasp and {differ['explore_success']} exploration "
+            "cells of 2,160") in readme, differ

@@ -533,15 +533,21 @@ def test_dataset_on_ray_equals_single_process_and_resumes(local_ray, tmp_path):
     _assert_same_arrays(_arrays(one / names[2]), _arrays(par / names[2]))
 
 
-def test_dataset_command_takes_the_ray_flags(local_ray, tmp_path, capsys):
-    from sern_jax.grasp import dataset
-
+def test_dataset_command_refuses_a_bad_ray_flag_in_one_line(tmp_path, capsys):
     out = tmp_path / "d0"
     assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
                  "--ray-cpus", "0", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ray-cpus" in err
     assert not out.exists()
+
+
+@pytest.mark.slow  # ~50 s on the 2 cores; the library's Ray path (the one the command calls)
+# is tested in the default run: test_dataset_on_ray_equals_single_process_and_resumes
+def test_dataset_command_takes_the_ray_flags(local_ray, tmp_path, capsys):
+    from sern_jax.grasp import dataset
+
+    out = tmp_path / "d0"
     # the command's own --ray path against the library's single-process shards; one object
     # per shard (--objects-per-shard 1) gives the default layout's arrays object by object
     assert main(["grasp", "dataset", "--objects", "2", "--poses", "1", "--ray",
@@ -685,8 +691,9 @@ def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
         runner._save = real
 
 
-def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
-        local_ray, tmp_path, capsys, monkeypatch):
+def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch):
+    """The tiny learning run in one process (``one``) and on Ray (``par``), the box's worker
+    killed mid-unit once (retried); checks they are equal; returns (one, par, single arrays)."""
     from sern_jax.grasp import learn_units
 
     one, par = tmp_path / "one", tmp_path / "ray"
@@ -704,7 +711,28 @@ def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
     assert sorted(p.name for p in (par / "units").iterdir()) == [
         "object_box", "object_triangular_prism"]
     assert any((par / ".jax_cache").iterdir())
+    return one, par, single
 
+
+def test_learn_on_ray_equals_single_process_with_a_killed_worker_retried(
+        local_ray, tmp_path, capsys, monkeypatch):
+    _, par, single = _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys,
+                                                                   monkeypatch)
+    # a finished run: nothing runs (the units are not even looked at), same files
+    shutil.rmtree(par / "units")
+    assert main(LEARN + ["--ray", "--out", str(par)]) == 0
+    assert "Ray:" not in capsys.readouterr().out and not (par / "units").exists()
+    _assert_same_arrays(single, _learn_arrays(par))
+
+
+@pytest.mark.slow  # four more learning runs on Ray (~2 min on the 2 cores beside the suite);
+# the default run tests a failing unit and a resume on Ray through other commands
+def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run(
+        local_ray, tmp_path, capsys, monkeypatch):
+    from sern_jax.grasp import learn_units
+
+    one, par, single = _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys,
+                                                                     monkeypatch)
     # a run stopped before its units were joined (box's unit lost), and a unit that keeps
     # failing: one line naming it, exit 1; the finished unit is kept
     kept = (par / "units" / "object_triangular_prism" / "checkpoint.npz").stat().st_mtime_ns
@@ -726,11 +754,6 @@ def test_learn_on_ray_equals_single_process_resumes_and_stops_on_a_failing_unit(
     assert "Ray: 1 objects" in capsys.readouterr().out
     assert (par / "units" / "object_triangular_prism" /
             "checkpoint.npz").stat().st_mtime_ns == kept
-    _assert_same_arrays(single, _learn_arrays(par))
-    # a finished run: nothing runs (the units are not even looked at), same files
-    shutil.rmtree(par / "units")
-    assert main(LEARN + ["--ray", "--out", str(par)]) == 0
-    assert "Ray:" not in capsys.readouterr().out and not (par / "units").exists()
     _assert_same_arrays(single, _learn_arrays(par))
 
     # a run left part-way without --ray (its checkpoint after round 1) continues on Ray:

@@ -264,12 +264,17 @@ BACKGROUND_NICE_MIN_CORES = 8  # ... on hosts with at least this many usable cor
 
 
 def many_cores() -> bool:
-    """Whether this process may use at least ``BACKGROUND_NICE_MIN_CORES`` cores: where
-    work made ahead of need runs at a lower priority (:func:`lower_priority`)."""
+    """Whether this process may use at least ``BACKGROUND_NICE_MIN_CORES`` cores (the
+    cores it may run on, or its task's share ``SERN_CPU_THREADS`` where that is less):
+    where work made ahead of need runs at a lower priority (:func:`lower_priority`)."""
     try:
-        return len(os.sched_getaffinity(0)) >= BACKGROUND_NICE_MIN_CORES
+        cores = len(os.sched_getaffinity(0))
     except AttributeError:
-        return (os.cpu_count() or 1) >= BACKGROUND_NICE_MIN_CORES
+        cores = os.cpu_count() or 1
+    share = os.environ.get("SERN_CPU_THREADS", "").strip()
+    if share.isdigit() and int(share) >= 1:
+        cores = min(cores, int(share))
+    return cores >= BACKGROUND_NICE_MIN_CORES
 
 
 def lower_priority() -> None:
@@ -477,9 +482,11 @@ def make_contexts(
         scene_lib.scene_ids(model)  # raises if it is not a grasp scene
     if poses is not None:
         poses = np.asarray(poses)
-        if poses.shape != (num_poses, 7) or not np.all(np.isfinite(poses)):
-            raise ValueError(f"poses must be finite with shape ({num_poses}, 7) (resting_poses"
-                             f" of the same key), got shape {poses.shape}")
+        if (poses.shape != (num_poses, 7) or poses.dtype != np.float64
+                or not np.all(np.isfinite(poses))):
+            raise ValueError(f"poses must be finite float64 with shape ({num_poses}, 7) "
+                             f"(resting_poses of the same key), got {poses.dtype} "
+                             f"{poses.shape}")
     poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config, poses)
     return GraspContexts(
         model=model, poses=poses, depth=depth, camera=camera, candidates=cands

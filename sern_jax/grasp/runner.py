@@ -588,15 +588,26 @@ _COUNTS_LOCK = threading.Lock()
 # docstring); False runs the phases one after another (the reference the tests compare with:
 # the same results and checkpoints, bit for bit).
 OVERLAP_EVALUATION = True
+# Most evaluations queued at once (each holds its round's learner states): the main thread
+# explores at most this many rounds ahead of the evaluation thread.
+MAX_QUEUED_EVALUATIONS = 2
 # Whether every batch's resting poses are queued to settle when the run starts (see run);
 # None: on a many-core host (context.many_cores), the other behaviour elsewhere.
 SETTLE_AHEAD: bool | None = None
 
 
-@functools.lru_cache(maxsize=1)
 def _object_pool() -> concurrent.futures.ThreadPoolExecutor:
-    """Threads that hand each object's trials to its simulator (they mostly wait)."""
-    return concurrent.futures.ThreadPoolExecutor(16, thread_name_prefix="sern-object-trials")
+    """Threads that hand each object's trials to its simulator (they mostly wait); one per
+    process, made under a lock (the main and the evaluation thread may ask at once)."""
+    with _OBJECT_POOL_LOCK:
+        if not _OBJECT_POOL:
+            _OBJECT_POOL.append(concurrent.futures.ThreadPoolExecutor(
+                16, thread_name_prefix="sern-object-trials"))
+        return _OBJECT_POOL[0]
+
+
+_OBJECT_POOL: list = []
+_OBJECT_POOL_LOCK = threading.Lock()
 
 
 def _check_actions(action, valid, names, specs, round_index):
@@ -785,7 +796,7 @@ def run(
     # The fixed low-variance evaluation poses of each (object, seed): queued first, gathered
     # when the first evaluation needs them.
     lowvar_jobs = (submit_contexts(LOWVAR_CONTEXT, 0, config.eval_poses)
-                   if config.eval_poses else None)
+                   if config.eval_poses and start_round <= num_r else None)
     lowvar_made = []
 
     def lowvar_contexts():
@@ -867,27 +878,42 @@ def run(
 
     # The evaluations run one after another in a thread of their own, beside the main
     # thread's exploration (module docstring); each saves the checkpoint through its round.
+    # After one fails, none runs or saves (a later checkpoint would claim the failed round).
     evaluator = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="sern-evaluate")
     queued = []  # futures of the evaluations queued and not yet waited for, in round order
+    failed = threading.Event()
 
     def evaluate_and_save(r, states, jobs):
-        evaluate(r, states, jobs)
-        _save(ckpt, fingerprint, *_through(results, rewards, r + 1), r + 1)
+        if failed.is_set():
+            raise concurrent.futures.CancelledError(f"round {r}: an earlier evaluation failed")
+        try:
+            evaluate(r, states, jobs)
+            _save(ckpt, fingerprint, *_through(results, rewards, r + 1), r + 1)
+        except BaseException:
+            failed.set()
+            raise
         bar.update(1)
         if not progress:  # a line per round where there is no bar (device logs)
             log(f"round {r}/{num_r} saved at {time.perf_counter() - t_run:.0f} s; "
                 + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
 
     def queue_evaluation(r):
+        # at most MAX_QUEUED_EVALUATIONS queued: each holds its round's learner states
+        while len(queued) >= (MAX_QUEUED_EVALUATIONS if OVERLAP_EVALUATION else 1):
+            t = time.perf_counter()
+            queued.pop(0).result()
+            tick("wait", t)
         queued.append(evaluator.submit(evaluate_and_save, r, list(states), take("eval", r)))
         if not OVERLAP_EVALUATION:
             wait_evaluations()
 
     def wait_evaluations():
         t = time.perf_counter()
-        while queued:
-            queued.pop(0).result()
-        tick("wait", t)
+        try:
+            while queued:
+                queued.pop(0).result()
+        finally:
+            tick("wait", t)
 
     def raise_failed_evaluation():
         """A queued evaluation's error, raised in the main thread as soon as it is known."""
@@ -987,14 +1013,16 @@ def run(
         wait_evaluations()
     except BaseException as err:
         # Keep the rounds already explored: their evaluations finish and save their
-        # checkpoints (on an interrupt, only the one running: the others are dropped).
+        # checkpoints before the context pools stop (on an interrupt, only the one running:
+        # those not started are dropped).
         for job in queued:
             if isinstance(err, KeyboardInterrupt):
                 job.cancel()
-            else:
+        for job in queued:
+            if not job.cancelled():
                 try:
                     job.result()
-                except Exception:  # the evaluation failed too: the first error is raised
+                except BaseException:  # the evaluation failed too: the first error is raised
                     pass
         raise
     finally:

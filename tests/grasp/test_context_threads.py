@@ -341,6 +341,7 @@ def test_lower_priority_renices_only_the_calling_thread_on_many_cores(monkeypatc
 
     if not sys.platform.startswith("linux"):
         pytest.skip("per-thread niceness is a Linux feature")
+    monkeypatch.delenv("SERN_CPU_THREADS", raising=False)
     main_tid = threading.get_native_id()
     main_before = os.getpriority(os.PRIO_PROCESS, main_tid)
 
@@ -384,16 +385,21 @@ def test_poses_settled_ahead_give_the_same_contexts_bit_for_bit():
     moved = _arrays(context.make_contexts(key, spec, 4, config, model=model, poses=other))
     assert not np.array_equal(moved["poses"], whole["poses"])
     assert not np.array_equal(moved["depth"], whole["depth"])
-    with np.testing.assert_raises_regex(ValueError, r"poses must be finite with shape \(4, 7\)"):
-        context.make_contexts(key, spec, 4, config, model=model, poses=poses[:3])
+    for bad in (poses[:3], poses.astype(np.float32)):
+        with np.testing.assert_raises_regex(ValueError,
+                                            r"poses must be finite float64 with shape \(4, 7\)"):
+            context.make_contexts(key, spec, 4, config, model=model, poses=bad)
 
 
 def test_many_cores_follows_the_usable_cores(monkeypatch):
     import os
 
+    monkeypatch.delenv("SERN_CPU_THREADS", raising=False)
     for cores, want in ((2, False), (context.BACKGROUND_NICE_MIN_CORES, True)):
         monkeypatch.setattr(os, "sched_getaffinity", lambda _pid, n=cores: set(range(n)))
         assert context.many_cores() is want
+    monkeypatch.setenv("SERN_CPU_THREADS", "2")  # a 2-CPU Ray task on a many-core node
+    assert context.many_cores() is False
 
 
 def test_readme_quotes_the_lead_strong_run_at_cbeac03():

@@ -81,7 +81,7 @@ def test_write_learn_outputs(tmp_path, tiny_theta0):
     assert cfg["theta0"] == "test" and cfg["config"]["policies"] == ["sern", "greedy"]
     np.testing.assert_array_equal(io.load_npz(tmp_path / "results.npz")["paper_eval"], pe)
     report = (tmp_path / "report.md").read_text()
-    assert "choose 3 s (75%)" in report
+    assert "choose 3 s" in report and "they overlap" in report and "s (75%)" not in report
     assert "70 simulated for 120 policy grasps" in report
     assert io.load_json(tmp_path / "metadata.json")["trial_counts"] == {
         "requested": 120, "simulated": 70}

@@ -8,6 +8,7 @@ import dataclasses
 import shutil
 import subprocess
 import sys
+import threading
 import time
 
 import jax
@@ -45,19 +46,50 @@ def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahe
     """runner.run, keeping a copy of the checkpoint as saved after each round: (result,
     {next_round: path of the copy}). ``overlap``: each round's evaluation beside the next
     round; ``settle_ahead``: every batch's resting poses queued at the start (both what a
-    many-core host does; here forced, on any host)."""
-    real, kept = runner._save, {}
+    many-core host does; here forced, on any host). With ``overlap``, round r's evaluation
+    saves only after the main thread has written round r + 1 (its update has run), so the
+    checkpoint must leave out rows the main thread has already filled (asserted)."""
+    real_save, real_through, kept = runner._save, runner._through, {}
+    real_update = runner._batched_update
+    updates, ahead = [0], []
+    updated = threading.Condition()
+
+    def counting_update(update):
+        fn = real_update(update)
+
+        def call(*args):
+            out_ = fn(*args)
+            with updated:
+                updates[0] += 1
+                updated.notify_all()
+            return out_
+        return call
+
+    def through(results, rewards, next_round):
+        # (the evaluation thread, before its save) wait for round next_round's updates
+        if next_round <= config.rounds:
+            with updated:
+                assert updated.wait_for(
+                    lambda: updates[0] >= len(config.policies) * next_round, timeout=300)
+        ahead.append(bool((np.asarray(results.explore_action)[next_round:] >= 0).any()))
+        return real_through(results, rewards, next_round)
 
     def save_and_copy(path, *args):
-        real(path, *args)
-        kept[args[-1]] = out.parent / f"{out.name}_checkpoint_{args[-1]}.npz"
-        shutil.copy(path, kept[args[-1]])
+        next_round = args[-1]
+        real_save(path, *args)
+        kept[next_round] = out.parent / f"{out.name}_checkpoint_{next_round}.npz"
+        shutil.copy(path, kept[next_round])
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(runner, "_save", save_and_copy)
+        mp.setattr(runner, "_batched_update", counting_update)
+        if overlap:
+            mp.setattr(runner, "_through", through)
         mp.setattr(runner, "OVERLAP_EVALUATION", overlap)
         mp.setattr(runner, "SETTLE_AHEAD", settle_ahead)
         res = runner.run(config, [spec], out, theta0=theta0, progress=False, log=_quiet)
+    if overlap:  # the evaluations did run beside later rounds' exploration
+        assert ahead and all(ahead[:-1]) and not ahead[-1], ahead
     return res, kept
 
 
@@ -105,6 +137,37 @@ def test_evaluation_beside_the_next_round_changes_nothing(run_a_checkpoints, tin
                              jax.tree.leaves(serial["states"][q])):
             np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
     assert res["trial_counts"] == serial["trial_counts"]
+
+
+def test_a_failed_evaluation_stops_the_run_and_no_later_round_is_saved(tiny_theta0, spec,
+                                                                      tmp_path, monkeypatch):
+    """Round 1's evaluation fails (its trials raise in the evaluation thread) while the main
+    thread explores round 2: the error stops the run, and no checkpoint claims round 1 or
+    later (the evaluation of round 2, queued behind it, neither runs nor saves)."""
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1)
+    real, calls = runner._run_trials, []
+
+    def trials(*args, **kwargs):
+        if threading.current_thread().name.startswith("sern-evaluate"):
+            calls.append(1)
+            if len(calls) > 2:  # round 0's two evaluations pass, round 1's first fails
+                raise RuntimeError("injected evaluation failure")
+        return real(*args, **kwargs)
+
+    saved = []
+    real_save = runner._save
+    monkeypatch.setattr(runner, "_run_trials", trials)
+    monkeypatch.setattr(runner, "_save", lambda path, *a: (saved.append(a[-1]),
+                                                           real_save(path, *a)))
+    with pytest.raises(RuntimeError, match="injected evaluation failure"):
+        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+    assert saved == [1]
+    assert int(io.load_npz(tmp_path / "checkpoint.npz")["next_round"]) == 1
+    # control: without the failure the same run saves every round
+    monkeypatch.setattr(runner, "_run_trials", real)
+    saved.clear()
+    runner.run(config, [spec], tmp_path / "ok", theta0=tiny_theta0, progress=False, log=_quiet)
+    assert saved == [1, 2, 3]
 
 
 def test_through_keeps_earlier_rounds_only():

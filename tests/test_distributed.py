@@ -714,6 +714,9 @@ def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch)
     return one, par, single
 
 
+@pytest.mark.slow  # ~190 s on the 2 cores beside the other test worker (Ray workers compile
+# the learners); the default run keeps Ray equal to one process through the regret and dataset
+# commands, a killed worker retried and a failing unit through run_units
 def test_learn_on_ray_equals_single_process_with_a_killed_worker_retried(
         local_ray, tmp_path, capsys, monkeypatch):
     _, par, single = _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys,
@@ -725,8 +728,7 @@ def test_learn_on_ray_equals_single_process_with_a_killed_worker_retried(
     _assert_same_arrays(single, _learn_arrays(par))
 
 
-@pytest.mark.slow  # four more learning runs on Ray (~2 min on the 2 cores beside the suite);
-# the default run tests a failing unit and a resume on Ray through other commands
+@pytest.mark.slow  # four more learning runs on Ray (~2 min on the 2 cores beside the suite)
 def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run(
         local_ray, tmp_path, capsys, monkeypatch):
     from sern_jax.grasp import learn_units

@@ -96,3 +96,24 @@ def test_reproduce_slow_hour_retiming_quoted():
         assert f"{run} end" in ab and wall_ab in ab.split(f"{run} end")[1].splitlines()[0]
     assert "226 vs 226 s and\n222 vs 247 s" in readme or "226 vs 226 s and 222 vs 247 s" in \
         " ".join(readme.split())
+
+
+def test_reproduce_paired_with_the_runner_change_quoted():
+    """The sixth session's paired re-timing (its runner against b16d97d's): the README quotes
+    both wall clocks and grasp-learning times from the record, and does not call it a
+    re-confirmation of the 5-minute figure."""
+    d = json.loads((RESULTS / "reproduce" / "reproduce_2core_ab_b7d6c39.json").read_text())
+    new, old = d["runs"]["new"], d["runs"]["old"]
+    assert new["exit_status"] == old["exit_status"] == 0
+    assert new["summary_checks"] == old["summary_checks"] == "28/28 verdicts as expected"
+
+    def mins(run):
+        wall = _wall(run)
+        return f"{int(wall // 60)} min {round(wall % 60)} s", wall
+
+    (new_q, new_w), (old_q, old_w) = mins(new), mins(old)
+    readme = " ".join(_readme().split())
+    quoted = (f"{new_q} against {old_q} (grasp learning "
+              f"{new['timings']['learn_s']:.0f} s against {old['timings']['learn_s']:.0f} s)")
+    assert quoted in readme, quoted
+    assert new_w > 300 and "not a re-confirmation either" in readme

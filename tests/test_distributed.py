@@ -764,7 +764,7 @@ def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run
 
     saved = _arrays(one / "checkpoint.npz")
     results = runner.RoundResults(*(saved[f] for f in runner.RoundResults._fields))
-    results, rewards = learn_units._unfinished_rounds(results, saved["explore_reward"], 2)
+    results, rewards = runner._through(results, saved["explore_reward"], 2)
     part = tmp_path / "part"
     part.mkdir()
     runner._save(part / "checkpoint.npz", str(saved["fingerprint"]), results, rewards, 2)

@@ -85,21 +85,6 @@ def _load_checkpoint(path: Path, fingerprint: str, what: str, log) -> dict | Non
     return saved
 
 
-def _unfinished_rounds(results: runner.RoundResults, rewards: np.ndarray,
-                       next_round: int) -> tuple[runner.RoundResults, np.ndarray]:
-    """Arrays as the runner holds them after round ``next_round - 1``: later rounds back to
-    their initial values (NaN, action -1, reward 0)."""
-    cut = slice(next_round, None)
-    fields = {}
-    for name in runner.RoundResults._fields:
-        a = np.array(getattr(results, name))
-        a[cut] = -1 if name == "explore_action" else np.nan
-        fields[name] = a
-    rewards = np.array(rewards)
-    rewards[cut] = 0
-    return runner.RoundResults(**fields), rewards
-
-
 def _split(saved: dict, o: int, path: Path, fingerprint: str) -> None:
     """Unit ``o``'s checkpoint cut from a single-process run's (object axis 1)."""
     results = runner.RoundResults(*(np.asarray(saved[f])[:, o:o + 1]
@@ -116,7 +101,7 @@ def _join(unit_ckpts: list[dict]) -> tuple[runner.RoundResults, np.ndarray, int]
                                                    axis=1)
                                     for f in runner.RoundResults._fields))
     rewards = np.concatenate([np.asarray(s["explore_reward"]) for s in unit_ckpts], axis=1)
-    results, rewards = _unfinished_rounds(results, rewards, next_round)
+    results, rewards = runner._through(results, rewards, next_round)
     return results, rewards, next_round
 
 

@@ -1129,7 +1129,8 @@ def _state_from_arrays(saved: dict, prefix: str, template: lbase.LearnerState,
 def _through(results: RoundResults, rewards: np.ndarray, next_round: int):
     """Copies of ``results`` and ``rewards`` holding rounds ``< next_round`` only, later
     rounds at their initial fill (NaN, action -1, reward 0): what the checkpoint of a run
-    that has finished those rounds holds, whatever the main thread has done since."""
+    that has finished those rounds holds, whatever the main thread has done since (and what
+    ``learn_units`` joins its units' checkpoints to)."""
     def cut(a, fill):
         a = np.array(a, copy=True)
         a[next_round:] = fill

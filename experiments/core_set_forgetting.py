@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-from sern_jax.commands import validate
+from sern_jax.infra import validate
 
 KINDS = ("none", "random", "dpp")
 METRICS = (("d0", "roc_auc"), ("d0", "bce"), ("new", "roc_auc"))
@@ -38,11 +38,11 @@ def summarise(results: dict) -> dict:
     seeds with its SD and 95 % Student-t half-width (n − 1 dof). Per metric, the paired
     differences dpp − none, random − none and dpp − random (seed s of every core set uses
     the same fine-tuning key, so seeds pair), with t intervals and Holm's correction over
-    all nine comparisons together (``sern_jax.stats.paired_differences``).
+    all nine comparisons together (``sern_jax.analysis.stats.paired_differences``).
     """
     import numpy as np
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     def per_seed(kind, part, metric):
         return np.array([r[part][metric] for r in results[kind]], float)
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
     if not (math.isfinite(args.lr) and args.lr > 0):
         bad(f"--lr must be a finite number > 0 (got {args.lr})")
 
-    from sern_jax.grasp import objects
+    from sern_jax.grasp.world import objects
 
     try:
         spec = objects.make_object(args.object)
@@ -101,9 +101,10 @@ def main(argv=None) -> int:
     import numpy as np
     import optax
 
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, dataset, pretrain, sim
-    from sern_jax.grasp import quality_net as qn
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts, dataset, pretrain
+    from sern_jax.grasp.world import sim
+    from sern_jax.grasp.model import quality_net as qn
 
     t0 = time.perf_counter()
     theta0 = artifacts.load_theta0()

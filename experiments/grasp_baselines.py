@@ -26,7 +26,7 @@ Per learner (``summarize``, from the saved per-seed results only): successes dur
 exploration (what a robot owner pays for), final low-variance greedy success, per-round
 pseudo-regret (when ``--regret-trials`` > 0); paired differences against SERN over seeds
 (each seed's value is the mean over the six objects), Student-t intervals (n − 1 dof) and
-Holm's correction over the comparisons of each metric (``sern_jax.stats``).
+Holm's correction over the comparisons of each metric (``sern_jax.analysis.stats``).
 
 Resuming. Every run directory's checkpoint holds the results and rewards only (kilobytes;
 the runner replays the learners' updates on resume), so a comparison stopped by a device
@@ -83,7 +83,7 @@ def learners() -> tuple[str, ...]:
 
 def online_config(policies, values: dict, **kw):
     """An OnlineConfig with learner hyperparameters ``values`` (field name -> value)."""
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     own = {k: v for k, v in values.items() if k in _CONFIG_FIELDS}
     hyper = {k: v for k, v in values.items() if k not in _CONFIG_FIELDS}
@@ -91,7 +91,7 @@ def online_config(policies, values: dict, **kw):
 
 
 def _specs(names):
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp.world import objects as objects_lib
 
     return [objects_lib.make_object(n) for n in names]
 
@@ -101,7 +101,7 @@ def tuning_objects(theta0, num: int = NUM_TUNING_OBJECTS) -> list[str]:
     order after the six reported (``artifacts.hard_set``: objects whose best candidate
     succeeds >= 80 % on fresh trials, by θ0 greedy success), never a reported object; if
     too few qualify, the remaining screened objects of lowest θ0 greedy success."""
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     reported = artifacts.hard_set(theta0)["objects"]
     ordered = artifacts.hard_set(theta0, len(reported) + num)["objects"]
@@ -115,14 +115,14 @@ def tuning_objects(theta0, num: int = NUM_TUNING_OBJECTS) -> list[str]:
 
 def hard_specs():
     """The shipped hard set's specs (the six reported objects) and θ0."""
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     theta0 = artifacts.load_theta0()
     return _specs(artifacts.hard_set(theta0)["objects"]), theta0
 
 
 def _run(config, specs, out_dir, theta0, progress):
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     t = time.perf_counter()
     res = runner.run(config, specs, out_dir, theta0=theta0, progress=progress)
@@ -137,7 +137,7 @@ def tune_setting(i: int, knobbed: tuple[str, ...], objects: list[str], seeds: in
     """Setting ``i`` of the GRID, run into ``run_dir``: the unit of ``tune --ray`` (issue 20;
     the same ``runner.run`` call that :func:`tune` makes, which then reads the finished run
     back)."""
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     values = {GRID[n][0]: GRID[n][1][i] for n in knobbed}
     config = online_config(knobbed, values, num_seeds=seeds, rounds=rounds, explore=explore,
@@ -151,10 +151,10 @@ def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
     """Runs the GRID's settings on :func:`tuning_objects`; writes and returns ``tuned.json``
     (and ``tune_per_seed.npz``: low-variance success [setting, R + 1, O, Q, S]). A setting
     whose run directory holds a finished run is read back, not rerun (resume). ``ray``
-    (``sern_jax.distributed.RayConfig``): the three settings run as Ray tasks first
+    (``sern_jax.infra.distributed.RayConfig``): the three settings run as Ray tasks first
     (:func:`tune_setting`), and are then read back; ``wall_s`` is then the tasks' time."""
-    from sern_jax import io
-    from sern_jax.grasp import artifacts
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
 
     theta0 = artifacts.load_theta0()
     objects = tuning_objects(theta0, num_objects)
@@ -169,7 +169,7 @@ def tune(out: Path, seeds: int, rounds: int, backend: str, progress: bool,
     if ray is not None:
         import importlib
 
-        from sern_jax import distributed
+        from sern_jax.infra import distributed
 
         # the module by its package name (not __main__), which every worker imports
         mod = importlib.import_module(__spec__.name if __spec__ else __name__)
@@ -227,7 +227,7 @@ def tuning_resolution(lowvar: np.ndarray, doc: dict, level: float = 0.95,
     """
     from scipy import stats as sps
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     names = list(doc["learners"])
     per_seed = lowvar[:, 1:].mean(axis=(1, 2))  # [setting, Q, S]
@@ -281,8 +281,8 @@ def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | Non
     must carry the fingerprint these settings give (``runner.run_fingerprint`` of the whole
     run, or of that object alone). Unit folders of objects not in ``specs`` are ignored (the
     runner never reads them). Returns the run's checkpoint (None if there is none)."""
-    from sern_jax import io
-    from sern_jax.grasp import learn_units, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.online import learn_units, runner
 
     advice = "delete it (or choose another --out) and rerun"
     mixed = (f"--out {out}: {run_dir} holds a different learning run than these settings; "
@@ -326,9 +326,9 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
     runner's checkpoint, so a run stopped after some rounds still leaves its finished rounds
     (``collect``); ``run_dir`` (default ``out/run``) is the runner's run directory (a
     checkpoint of kilobytes): the same command resumes it. ``ray``
-    (``sern_jax.distributed.RayConfig``): one Ray task per object
-    (``sern_jax.grasp.learn_units``: ``run_dir/units/``, joined into the same checkpoint)."""
-    from sern_jax import io
+    (``sern_jax.infra.distributed.RayConfig``): one Ray task per object
+    (``sern_jax.grasp.online.learn_units``: ``run_dir/units/``, joined into the same checkpoint)."""
+    from sern_jax.infra import io
 
     specs, theta0 = hard_specs()
     specs = specs[:num_objects] if num_objects else specs
@@ -366,7 +366,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
     if ray is None:
         res, secs = _run(config, specs, run_dir, theta0, progress)
     else:  # issue 20: the same checkpoint, each object's copies a Ray task
-        from sern_jax.grasp import learn_units
+        from sern_jax.grasp.online import learn_units
 
         t = time.perf_counter()
         res = learn_units.run(config, specs, run_dir, theta0=theta0, ray=ray,
@@ -381,7 +381,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
 
 
 def _physics_settings():
-    from sern_jax.grasp import sim
+    from sern_jax.grasp.world import sim
 
     fn = getattr(sim, "physics_settings", None)  # the trial (force, frictions, schedule)
     return fn() if fn else None
@@ -406,7 +406,7 @@ def collect(out: Path) -> None:
     A merged comparison (:func:`merge`; ``meta["merged"]``) takes each merged learner's
     slices from its own run's checkpoint (``out/<merged run_dir>/checkpoint.npz``), after
     checking that run's reference learner equals the main run's bit for bit."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     meta = json.loads((out / "meta.json").read_text())
     run_dir = Path(meta["run_dir"])
@@ -491,7 +491,7 @@ def merge(out: Path, new: Path) -> dict:
     calls and code), ``tuned.json`` / ``tune_per_seed.npz`` (the learners' tuning replaced,
     the earlier one kept under ``replaced``), then :func:`collect` (per-seed file, summary,
     table)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     meta, meta_new = (json.loads((d / "meta.json").read_text()) for d in (out, new))
     for key in _MERGE_SAME:
@@ -568,7 +568,7 @@ def per_seed_metrics(per_seed: dict, meta: dict) -> dict:
 
 def summarize(out: Path) -> dict:
     """summary.json and table.md from per_seed.npz and meta.json (nothing recomputed)."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     per_seed = dict(np.load(out / "per_seed.npz"))
     meta = json.loads((out / "meta.json").read_text())
@@ -717,8 +717,9 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.online import runner
     from sern_jax.learners import base as lbase
     from sern_jax.learners import registry
 
@@ -862,7 +863,7 @@ def record_learn_timing(run_dir: Path, summary_json: Path, time_file: Path) -> d
 
 
 def main(argv=None) -> None:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     p = validate.script_parser(__spec__, description=__doc__.split("\n\n")[0])
@@ -903,7 +904,7 @@ def main(argv=None) -> None:
                    help="merge: a tune + run of --policies sern,<learners> (its --out) whose "
                         "learners replace the comparison's in --out (sern must be equal bit "
                         "for bit)")
-    from sern_jax import distributed
+    from sern_jax.infra import distributed
 
     distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
     a = p.parse_args(argv)

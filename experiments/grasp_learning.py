@@ -9,7 +9,7 @@ one small JSON per run label (``<label>.json``; ``<label>.part-<objects>.json`` 
 axis). ``summarise`` computes everything the docs quote from those files alone: Table I
 rows (mean, population SD ``std``, sample ``sd`` and ``se`` over seeds), per-policy pooled
 figures per round, and the paired comparisons of the final round with Student-t intervals
-over seeds (n − 1 dof, ``sern_jax.stats``) and Holm's correction over the comparisons
+over seeds (n − 1 dof, ``sern_jax.analysis.stats``) and Holm's correction over the comparisons
 reported together (one family per setting, named in ``summary.json``).
 
     python -m experiments.grasp_learning paper            # 6 objects x 3 policies x 5 seeds
@@ -90,8 +90,8 @@ def per_seed_doc(results, *, label: str, setting: str, objects: list[str],
     """The per-seed record of one run: every figure per round, object, policy and seed
     (-1 = not measured: round 0's exploration, or regret accounting off), the command, the
     machine, θ0's digest and the trial configuration it was made with."""
-    from sern_jax import io
-    from sern_jax.grasp import scene, sim
+    from sern_jax.infra import io
+    from sern_jax.grasp.world import scene, sim
 
     get = results._asdict() if hasattr(results, "_asdict") else dict(results)
     k = rounds_done + 1
@@ -120,7 +120,7 @@ def save_per_seed(path, doc: dict) -> None:
     """Writes a per-seed record as compact JSON (atomically)."""
     import json
 
-    from sern_jax import io
+    from sern_jax.infra import io
 
     io.save_text(path, json.dumps(io.to_jsonable(doc), separators=(",", ":")) + "\n")
 
@@ -135,7 +135,7 @@ def _file_name(label: str, objects, all_objects) -> str:
 def load_results(results_dir) -> dict:
     """{label: doc} with the parts of a label joined along the object axis (in the hard
     set's order); arrays as float64 numpy arrays with NaN where -1 was stored."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     results_dir = Path(results_dir)
     groups: dict[str, list[dict]] = {}
@@ -180,7 +180,7 @@ def load_results(results_dir) -> dict:
 
 
 def _ci(x) -> dict:
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     c = stats.t_interval(np.asarray(x, np.float64))
     return {"mean": c.mean, "sd": c.sd, "se": c.se, "n": c.n, "half": c.half,
@@ -188,7 +188,7 @@ def _ci(x) -> dict:
 
 
 def _comparisons(names, diffs) -> list[dict]:
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     rows = stats.paired_differences(np.stack(diffs), names=names)
     return [r._asdict() for r in rows]
@@ -196,8 +196,8 @@ def _comparisons(names, diffs) -> list[dict]:
 
 def summarise(results_dir, write: bool = True) -> dict:
     """Everything the docs quote from a setting's per-seed files (see the module doc)."""
-    from sern_jax import io
-    from sern_jax.grasp import runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.online import runner
 
     results_dir = Path(results_dir)
     docs = load_results(results_dir)
@@ -399,7 +399,7 @@ def regret_markdown(summary: dict, label: str) -> str:
 
 
 def _machine_line() -> str:
-    from sern_jax import io
+    from sern_jax.infra import io
 
     m = io.machine(devices=True)
     return (f"{m['cpu']} ({m['cores_usable']} of {m['cpu_count']} cores usable), "
@@ -409,8 +409,9 @@ def _machine_line() -> str:
 def collect(out, results) -> list[Path]:
     """Per-seed files of the runs under ``out`` that stopped before their last round (from
     their checkpoints); finished runs already wrote theirs."""
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.online import runner
 
     written = []
     for meta_file in sorted(Path(out).glob("*/run_meta.json")):
@@ -446,7 +447,7 @@ def collect(out, results) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -494,8 +495,10 @@ def main(argv=None) -> int:
         if v < lo:
             parser.error(f"{name} must be >= {lo}")
 
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import objects
+    from sern_jax.grasp.online import runner
 
     theta0 = artifacts.load_theta0()
     hard = artifacts.hard_set(theta0, num)

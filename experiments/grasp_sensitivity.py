@@ -95,7 +95,7 @@ def world(cell: str):
     defaults with the cell's force, friction range and depth sensor. The previous grid's
     cells (``CELLS_6N``) are accepted too: they differ from today's defaults in the same
     three settings only where the name says so (their files record their own configs)."""
-    from sern_jax.grasp import context, sim
+    from sern_jax.grasp.world import context, sim
 
     force, friction, noise = (cell.split("_") + ["", "", ""])[:3]
     if cell not in CELLS and cell not in CELLS_6N:
@@ -130,7 +130,8 @@ class GridMismatch(ValueError):
 
 
 def _grid_settings(seeds: int, rounds: int, num_objects: int) -> dict:
-    from sern_jax.grasp import artifacts, sim
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import sim
 
     theta0 = artifacts.load_theta0()
     return {"grid": GRID, "seeds": int(seeds), "rounds": int(rounds),
@@ -144,7 +145,7 @@ def check_grid(out: Path, seeds: int, rounds: int, num_objects: int,
     """Pins ``out/grid.json`` to these settings (written on first use); raises
     :class:`GridMismatch` naming what differs when ``out`` holds another grid, or the
     previous trial's files (no grid.json, per-seed files without a label)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     want = json.loads(json.dumps(_grid_settings(seeds, rounds, num_objects)))
     f = Path(out) / "grid.json"
@@ -170,8 +171,10 @@ def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
     """Runs (or resumes) one cell of today's grid; writes ``out/<cell>.json``
     (``experiments.grasp_learning``'s per-seed format, with the world) and returns it.
     A cell whose file already holds every round is not rerun."""
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import objects
+    from sern_jax.grasp.online import runner
 
     from . import grasp_learning
 
@@ -227,7 +230,7 @@ def summarise(out: str | Path, level: float = 0.95) -> dict:
     ``summary.json``. Today's grid (per-seed files with a ``label``) or the previous
     trial's (``results/sensitivity_6N``, the older format); a directory holding both, or
     cells of another θ0, seeds, rounds, objects or world than its grid's, is refused."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     out = Path(out)
     files = [f for f in sorted(out.glob("*.json")) if f.name not in ("summary.json",
@@ -244,7 +247,7 @@ def summarise(out: str | Path, level: float = 0.95) -> dict:
 
 
 def _summarise_today(out: Path, level: float = 0.95) -> dict:
-    from sern_jax import io
+    from sern_jax.infra import io
 
     from . import grasp_learning
 
@@ -355,7 +358,8 @@ def _summarise_today(out: Path, level: float = 0.95) -> dict:
 def _summarise_6N(out: Path, level: float = 0.95) -> dict:
     """The previous trial's grid (``results/sensitivity_6N``, older per-seed format), as it
     was summarised when it was made (its committed summary.json is this output)."""
-    from sern_jax import io, stats
+    from sern_jax.infra import io
+    from sern_jax.analysis import stats
 
     CELLS, WORLD_A = CELLS_6N, WORLD_A_6N  # the previous grid's
     docs = {c: io.load_json(out / f"{c}.json") for c in CELLS if (out / f"{c}.json").exists()}
@@ -446,7 +450,7 @@ TRANSFER_NOTES = {
 
 def transfer_world(cell: str):
     """(ContextConfig, TrialConfig, backend, θ0 directory or None) of a transfer cell."""
-    from sern_jax.grasp import context, sim
+    from sern_jax.grasp.world import context, sim
 
     if cell not in TRANSFER_CELLS:
         raise ValueError(f"unknown transfer cell {cell!r}; choose from {TRANSFER_CELLS}")
@@ -473,8 +477,10 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
     """Runs one transfer cell; writes ``out/<cell>.json`` (grasp_learning's per-seed format,
     with the world) and returns it. A stopped run is turned into a file of the rounds it
     finished by ``experiments.grasp_learning collect out/runs out``."""
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, objects, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import objects
+    from sern_jax.grasp.online import runner
 
     from . import grasp_learning
 
@@ -518,7 +524,7 @@ def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
     paired by seed), the gain online learning makes in B by each reported round (paired
     t-intervals over seeds), the share of the gap it recovers, the distance to the same
     policy learning in A, and SERN − peer in B (Holm over every cell, peer and round)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     from . import grasp_learning
 
@@ -666,7 +672,7 @@ def _run_grid(args, transfer: bool = False) -> int:
         if c not in names:  # refuses an unknown cell before any work
             raise SystemExit(f"--cells: unknown cell {c!r}; choose from {', '.join(names)}")
     sub = "transfer-cell" if transfer else "cell"
-    from sern_jax import distributed
+    from sern_jax.infra import distributed
 
     try:
         ray = distributed.from_args(args)  # --ray [ADDRESS]: cells as Ray tasks (issue 20)
@@ -782,7 +788,7 @@ def _run_grid(args, transfer: bool = False) -> int:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser;
     # the subcommands' parsers are of its class)
@@ -800,7 +806,7 @@ def main(argv=None) -> int:
     p_run.add_argument("--workers", type=int, default=8)
     p_run.add_argument("--deadline", type=float, default=0.0,
                        help="seconds after which running cells are stopped (0 = none)")
-    from sern_jax import distributed
+    from sern_jax.infra import distributed
 
     distributed.add_arguments(p_run)
     p_sum = sub.add_parser("summarise", help="summary.json from saved cells")

@@ -49,8 +49,8 @@ def _pipeline():
     """Jitted depth renderer and candidate sampler (shared across objects)."""
     import jax
 
-    from sern_jax.grasp import candidates as cand_lib
-    from sern_jax.grasp import depth as depth_lib
+    from sern_jax.grasp.world import candidates as cand_lib
+    from sern_jax.grasp.world import depth as depth_lib
 
     camera = depth_lib.CameraConfig()
     params = depth_lib.overhead_params(camera)
@@ -64,8 +64,8 @@ def context(spec, pose_seed: int, key, pipeline=None):
     """(model, Candidates as numpy) for one resting pose of ``spec``."""
     import jax
 
-    from sern_jax.grasp import depth as depth_lib
-    from sern_jax.grasp import scene as scene_lib
+    from sern_jax.grasp.world import depth as depth_lib
+    from sern_jax.grasp.world import scene as scene_lib
 
     _, params, render, sample = pipeline or _pipeline()
     model = scene_lib.build_scene(spec, seed=pose_seed)
@@ -80,7 +80,7 @@ def measure_object(spec, poses: int, trials: int, seed: int, num_threads=None,
     """Per-pose candidate success probabilities of one object (see the module doc)."""
     import jax
 
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     pipeline = pipeline or _pipeline()
     root = jax.random.key(seed)
@@ -143,7 +143,7 @@ def summarise(pose_records) -> dict:
 
 
 def _object_list(text: str) -> list[str]:
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp.world import objects as objects_lib
 
     names = []
     for item in text.split(","):
@@ -174,7 +174,7 @@ def table(results) -> str:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     ap = validate.script_parser(__spec__, description=__doc__.split("\n\n")[0])
@@ -190,7 +190,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="JSON file to write")
     args = ap.parse_args(argv)
 
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp.world import objects as objects_lib
 
     pipeline = _pipeline()
     results = []

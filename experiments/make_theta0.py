@@ -24,7 +24,7 @@ _FLAGS = {"num_objects": "--objects", "poses_per_object": "--poses", "epochs": "
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
@@ -45,8 +45,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
 
-    from sern_jax import io
-    from sern_jax.grasp import dataset, objects, pretrain
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import dataset, pretrain
+    from sern_jax.grasp.world import objects
 
     try:  # the configs' own ranges (--core-k above the k-DPP's rank, ...) before any work
         d0_config = dataset.DatasetConfig(num_objects=args.objects, poses_per_object=args.poses)
@@ -67,7 +68,7 @@ def main(argv=None) -> int:
     manifest = pretrain.pretrain(out / "d0", pretrain_config, out / "theta0",
                                  progress=not args.no_progress)
     timings["pretrain_s"] = time.perf_counter() - t
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     theta0 = artifacts.load_theta0(out / "theta0")
     t = time.perf_counter()
@@ -98,8 +99,8 @@ def _record(theta_dir: Path, argv, args, summary, timings, screen_settings, host
     import jax
     import mujoco
 
-    from sern_jax import io
-    from sern_jax.grasp import scene, sim
+    from sern_jax.infra import io
+    from sern_jax.grasp.world import scene, sim
 
     path = theta_dir / "manifest.json"
     manifest = io.load_json(path)

@@ -98,7 +98,7 @@ def check(num_seeds: int = 5, num_grasps: int = 5) -> dict:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # no flags of its own: anything else is one line, exit 2 (validate's parser); --help
     validate.script_parser(__spec__, description=__doc__.splitlines()[0]).parse_args(argv)

@@ -65,7 +65,7 @@ __all__ = ["main"]
 
 
 def _digest(path: Path) -> str:
-    from sern_jax import io
+    from sern_jax.infra import io
 
     arrays = io.load_npz(path)
     h = hashlib.sha256()
@@ -83,8 +83,8 @@ def _run(n_objects: int, workers: int, poses: int, out: Path, cache: str,
     shards (``dataset.write_shard``, the same unit function, through ``run_units``)."""
     import ray
 
-    from sern_jax import distributed
-    from sern_jax.grasp import dataset
+    from sern_jax.infra import distributed
+    from sern_jax.grasp.model import dataset
 
     config = dataset.DatasetConfig(num_objects=n_objects, poses_per_object=poses,
                                    objects_per_shard=1)
@@ -141,7 +141,7 @@ def _run(n_objects: int, workers: int, poses: int, out: Path, cache: str,
 
 
 def _load_npz(path: Path) -> dict:
-    from sern_jax import io
+    from sern_jax.infra import io
 
     return io.load_npz(path)
 
@@ -171,7 +171,7 @@ def _default_d0(args, argv, cache: str, started: float) -> int:
     """The default D0 at ``--full-workers`` workers and a one-worker sample, all at once."""
     import subprocess
 
-    from sern_jax import io
+    from sern_jax.infra import io
 
     full = [int(w) for w in args.full_workers.split(",") if w]
     if not full or any(w < 2 for w in full):
@@ -256,7 +256,7 @@ def _shard_mismatches(runs: list[dict]) -> list[str]:
 def _provenance(argv, warm: dict, runs: list[dict]) -> dict:
     """What every scaling record states about how it was made: the command line, machine,
     environment, versions, the warm-up's seconds and the runs (without their shard hashes)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     return {"command": " ".join([Path(sys.executable).name, "-m", "experiments.ray_scaling",
                                  *(argv if argv is not None else sys.argv[1:])]),
@@ -294,7 +294,7 @@ def sampled_estimate(t1_sample: dict, t_full: dict, num_objects: int,
     """
     import numpy as np
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     names = sorted(t1_sample)
     t1 = np.array([t1_sample[n] for n in names], np.float64)
@@ -323,7 +323,7 @@ def _d0_sampled(args, argv, cache: str, started: float) -> int:
     other on one host."""
     import numpy as np
 
-    from sern_jax import io
+    from sern_jax.infra import io
 
     full = [int(w) for w in args.full_workers.split(",") if w]
     if not full or any(w < 2 for w in full):
@@ -394,7 +394,7 @@ def _d0_sampled(args, argv, cache: str, started: float) -> int:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     p = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
@@ -448,7 +448,7 @@ def main(argv=None) -> int:
     if args.mode == "d0-sampled" and args.sample_size > args.objects:
         p.error(f"--sample-size must be <= --objects ({args.objects}), got {args.sample_size}")
     cache = args.cache or str((args.out / ".jax_cache").resolve())
-    from sern_jax import io
+    from sern_jax.infra import io
 
     started = time.perf_counter()
     if args.mode == "default-d0":

@@ -59,7 +59,7 @@ def summarise(err, floor, err_raw, d2, split, names, ns=NS, ms=DELTA2_MS):
     """
     import numpy as np
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     err, floor, err_raw = np.asarray(err), np.asarray(floor), np.asarray(err_raw)
     d2, split = np.asarray(d2), np.asarray(split)
@@ -167,7 +167,7 @@ def _run_trials(simulator, grasps, pose, noise, cand, lo, hi):
     ``cand`` of one context."""
     import numpy as np
 
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     g = np.repeat(np.asarray(grasps)[cand], hi - lo, axis=0)
     tn = sim_lib.TrialNoise(*(np.tile(a[lo:hi], (len(cand),) + (1,) * (a.ndim - 1))
@@ -201,7 +201,7 @@ def split_test(counts, n1, n2):
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any work (validate's parser)
     parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
@@ -232,12 +232,15 @@ def main(argv=None) -> int:
     import numpy as np
     import optax
 
-    from sern_jax import io, schedules, theory
-    from sern_jax.grasp import artifacts, dataset, objects, pretrain
-    from sern_jax.grasp import context as context_lib
-    from sern_jax.grasp import crops as crops_lib
-    from sern_jax.grasp import quality_net as qn
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.infra import io
+    from sern_jax.core import schedules
+    from sern_jax.analysis import theory
+    from sern_jax.grasp.model import artifacts, dataset, pretrain
+    from sern_jax.grasp.world import objects
+    from sern_jax.grasp.world import context as context_lib
+    from sern_jax.grasp.world import crops as crops_lib
+    from sern_jax.grasp.model import quality_net as qn
+    from sern_jax.grasp.world import sim as sim_lib
 
     if args.objects:
         for name in args.objects.split(","):

@@ -42,7 +42,7 @@ def fixed_trials(names, poses: int, candidates: int, seed: int):
     """[(spec, grasps [n, 4], object poses [n, 7], TrialNoise [n])] per object."""
     import jax
 
-    from sern_jax.grasp import context, objects, sim
+    from sern_jax.grasp.world import context, objects, sim
 
     root = jax.random.key(seed)
     out = []
@@ -70,7 +70,7 @@ def outcomes(trials, timestep_factor: int = 1, finger_force: float | None = None
     """[N] bool successes of the fixed trials in one setting (all objects, concatenated)."""
     import dataclasses
 
-    from sern_jax.grasp import context, scene, sim
+    from sern_jax.grasp.world import context, scene, sim
 
     base = scene.SceneConfig()
     cfg = dataclasses.replace(base, timestep=base.timestep / timestep_factor,
@@ -86,7 +86,7 @@ def outcomes(trials, timestep_factor: int = 1, finger_force: float | None = None
 
 
 def _agree(a, b) -> dict:
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     k, n = int(np.sum(a == b)), len(a)
     lo, hi = stats.clopper_pearson(k, n, 0.95)
@@ -101,7 +101,7 @@ def _per_object(sizes, names, *outs) -> dict:
 
 
 def main(argv=None) -> int:
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # bad input: one line naming the flag, exit 2, before any compile (validate's parser)
     ap = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
@@ -123,7 +123,7 @@ def main(argv=None) -> int:
         ap.error(f"--forces must be comma-separated numbers, got {args.forces!r}")
     if any(not (f > 0) for f in forces):
         ap.error("--forces must be > 0")
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp.world import objects as objects_lib
 
     if not names:
         ap.error("--objects must name at least one object")
@@ -133,8 +133,8 @@ def main(argv=None) -> int:
         except ValueError:
             ap.error(f"--objects: unknown object {n!r}")
 
-    from sern_jax import io
-    from sern_jax.grasp import scene, sim
+    from sern_jax.infra import io
+    from sern_jax.grasp.world import scene, sim
 
     default_force = scene.SceneConfig().finger_force
     t0 = time.perf_counter()

@@ -28,7 +28,7 @@ _LABELS = {"explore_success": "exploration success (%)",
 
 
 def _band(x: np.ndarray):
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     ci = stats.t_interval(x, 0.95)
     return ci.mean, np.nan_to_num(ci.half)

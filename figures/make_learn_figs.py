@@ -31,7 +31,7 @@ ABLATIONS = ("alpha", "core_set", "loss", "schedule")
 def _band(x: np.ndarray):
     """Mean and 95 % Student-t half-width (n − 1 dof) over the last axis (seeds); zero
     width with one seed (no interval: the title says how many seeds)."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     n = x.shape[-1]
     mean = x.mean(-1)
@@ -47,7 +47,7 @@ def _fill(ax, x, m, h, **kwargs):
 
 def make_figures(run_dir: str | Path) -> list[Path]:
     """``<run_dir>/figures/success.png`` and ``paired.png`` of a ``sern grasp learn`` run."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     run_dir = Path(run_dir)
     res = io.load_npz(run_dir / "results.npz")
@@ -60,7 +60,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
 def figures_from_results(results_dir: str | Path, prefix: str | Path) -> list[Path]:
     """``<prefix>_success.png`` and ``<prefix>_paired.png`` from a setting's per-seed
     files (one run label: paper, strong, regret)."""
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
     grasp_learning = script_module("experiments", "grasp_learning")
 
     docs = grasp_learning.load_results(results_dir)
@@ -162,7 +162,7 @@ def ablation_figure(results_root: str | Path, out_png: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
     grasp_learning = script_module("experiments", "grasp_learning")
 
     rows = []

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sern_jax import io, stats
+from sern_jax.infra import io
+from sern_jax.analysis import stats
 
 __all__ = ["make_figures"]
 
@@ -65,7 +66,7 @@ def make_figures(run_dir: str | Path) -> list[Path]:
         counts = res["softmax__counts"].astype(float)  # [S, G, K]
         frac = counts.mean(0) / t[:, None]  # [G, K]
         k = counts.shape[-1]
-        floor = summary.get("theorem1")  # saved by experiments/regret.py (absent in old runs)
+        floor = summary.get("theorem1")  # saved by sern_jax/experiment/regret.py (absent in old runs)
         fig, ax = plt.subplots(figsize=(7, 5))
         means = res["means"].reshape(-1, k).mean(0)
         order = np.argsort(-means)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sern_jax import io
+from sern_jax.infra import io
 
 __all__ = ["make_all"]
 

@@ -26,7 +26,7 @@ def make_figure(run_dir: str | Path, out: str | Path | None = None) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sern_jax import io
+    from sern_jax.infra import io
 
     run_dir = Path(run_dir)
     res = io.load_json(run_dir / "results.json")

@@ -27,7 +27,7 @@ def make_figure(results_dir: str | Path, out_png: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
     grasp_learning = script_module("experiments", "grasp_learning")
     from .make_learn_figs import _band, _fill
 

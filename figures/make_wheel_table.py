@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from sern_jax import io
+from sern_jax.infra import io
 
 __all__ = ["wheel_table"]
 

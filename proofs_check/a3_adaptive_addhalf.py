@@ -14,7 +14,7 @@ INSTANCES = ((0.9, 0.5), (0.6, 0.4))
 
 def fixed_n_max(n_max=200, num_p=401):
     """max over n <= n_max and p of sqrt(n+1) E|(S+1/2)/(n+1) - p|, S ~ Bin(n, p), exactly."""
-    from sern_jax import theory as th
+    from sern_jax.analysis import theory as th
 
     best = 0.0
     ps = np.linspace(0.0, 1.0, num_p)

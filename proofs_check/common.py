@@ -152,7 +152,7 @@ def t3_runs(ctx):
 
 def t3_per_seed(out, means, est, alpha, horizon, with_entropy=True):
     """Per-seed regret and the four Theorem 3 terms at T (Rao–Blackwellised a_t term)."""
-    from sern_jax import theory as th
+    from sern_jax.analysis import theory as th
 
     d = out.diag
     terms = th.thm3_terms(a3_beta(est, means), d.inv_sqrt_best[:, -1], d.inv_sqrt_rb[:, -1],

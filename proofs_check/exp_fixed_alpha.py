@@ -13,7 +13,7 @@ import numpy as np
 
 from . import common
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 ALPHA = 0.05
 NUM_ARMS = 64

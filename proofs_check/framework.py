@@ -195,7 +195,7 @@ def mean_cell(label, values, bound, direction="le", alpha=0.01, vacuous=False,
     (1-q)^S, and a difference moves the mean by at most (hi - v) or (v - lo). Without a range
     the statistic is treated as deterministic (e.g. an exact oracle).
     """
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     x = _seed_values(values)
     ci = stats.t_interval(x, 1.0 - alpha)  # two-sided 1 − alpha
@@ -230,7 +230,7 @@ def equal_cell(label, values, target, alpha=0.01, **kw) -> Cell:
     checks), with the two-sided 1 − alpha t interval."""
     from scipy.stats import t as student_t
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     x = _seed_values(values)
     ci = stats.t_interval(x, 1.0 - alpha)
@@ -246,7 +246,7 @@ def equal_cell(label, values, target, alpha=0.01, **kw) -> Cell:
 
 def tail_cell(label, k, n, bound, alpha=0.01, **kw) -> Cell:
     """Clopper–Pearson test of P(event) <= bound from k events in n seeds (audit §2.2)."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     k, n, b = int(k), int(n), float(bound)
     _, hi = stats.clopper_pearson(k, n, 1.0 - alpha, side="two")
@@ -275,7 +275,7 @@ def bootstrap_cell(label, data, fn, bound, direction="le", alpha=0.01, seed=0,
     """
     from scipy.stats import t as student_t
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     n = int(np.asarray(data).shape[0])
     est, lo, hi = stats.bootstrap_ci(data, fn, seed=seed, num_resamples=num_resamples,
@@ -300,7 +300,7 @@ def bootstrap_cell(label, data, fn, bound, direction="le", alpha=0.01, seed=0,
 def decide(cells: list[Cell], alpha: float) -> str:
     """Holm over the statistical cells; exact cells fail on any violation. Sets each cell's
     verdict and returns the family verdict."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     tested = [c for c in cells if not c.info_only]
     stat_cells = [c for c in tested if not c.exact]
@@ -405,7 +405,8 @@ def engine_run(*, estimator: str, means, horizon: int, num_seeds: int, alpha0: f
     """
     import jax
 
-    from sern_jax import executor, problems, simulate
+    from sern_jax.engine import drive as executor, simulate
+    from sern_jax.core import problems
 
     m = np.asarray(means, dtype=np.float64)
     key = (estimator, m.tobytes(), m.shape, horizon, num_seeds, float(alpha0), policy, schedule,
@@ -450,7 +451,7 @@ def run_check(check: Check, ctx: Context) -> CheckResult:
 def alpha_log(alpha0: float, p: float, horizon: float) -> float:
     """alpha = alpha0 / ln(T^p) (Algorithm 1 / Theorem 4 schedule): ``schedules.alpha_of_horizon``
     with ``kind="log"``, as a float."""
-    from sern_jax import schedules
+    from sern_jax.core import schedules
 
     return float(schedules.alpha_of_horizon("log", horizon, alpha0, p))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from . import framework as fw
 from . import neural_runs
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 ALPHAS = (0.1, 0.5)
 

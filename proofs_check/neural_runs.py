@@ -60,9 +60,9 @@ def _run(learner: str, alpha: float, lr: float, seeds: int, horizon: int, root_s
          loss: str = "bce", problem_name: str = "gap"):
     import jax
 
-    from sern_jax import contextual_problems as cp
-    from sern_jax import networks
-    from sern_jax import neural_runner as nr
+    from sern_jax.core import contextual_problems as cp
+    from sern_jax.engine import networks
+    from sern_jax.engine import neural as nr
     from sern_jax.learners import base, registry
 
     if problem_name == "split":

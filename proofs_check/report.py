@@ -33,7 +33,7 @@ def _jsonable(x):
 
 
 def build_json(results, args, total_s, command) -> dict:
-    from sern_jax import io
+    from sern_jax.infra import io
 
     options = dict(quick=args.quick, only=args.only, seeds=args.seeds, alpha=args.alpha,
                    seed=args.seed, wrong_bounds=args.wrong_bounds)

@@ -6,7 +6,7 @@ import numpy as np
 
 from . import common
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 
 def simulate(ctx):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 R = (1.0, 0.0)
 ALPHA, BETA, EPS, HORIZON = 1.0, 0.99, 0.01, 113

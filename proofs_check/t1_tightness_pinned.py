@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 
 def _grid(ctx):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 
 def simulate(ctx):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 MEANS = (0.8, 0.3)
 TRACK = 1  # the worse arm

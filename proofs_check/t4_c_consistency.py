@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from . import framework as fw
-from sern_jax import schedules
-from sern_jax import theory as th
+from sern_jax.core import schedules
+from sern_jax.analysis import theory as th
 
 ALPHA0 = (0.1, 0.5, 0.9, 1.0, 2.0)
 PS = (0.1, 0.2, 0.3)

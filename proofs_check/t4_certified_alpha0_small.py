@@ -8,7 +8,7 @@ import numpy as np
 
 from . import common
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 # (alpha0, p, Delta): the audit's two instances; r = (1, 1 - Delta), adv oracle with beta = 1.
 INSTANCES = ((0.1, 0.15, 0.2), (0.1, 0.3, 0.1))

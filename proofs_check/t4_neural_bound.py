@@ -15,7 +15,7 @@ import numpy as np
 from . import a3_neural_error as a3
 from . import framework as fw
 from . import neural_runs
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 ALPHA, P = 0.5, 0.3
 

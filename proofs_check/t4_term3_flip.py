@@ -8,7 +8,7 @@ import numpy as np
 
 from . import common
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 MEANS = (0.8, 0.3)  # a flip of a* (to 0.2) is a strict misidentification, no ties
 BETA, Q = 0.3, 0.49

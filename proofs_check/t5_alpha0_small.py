@@ -8,7 +8,7 @@ import numpy as np
 
 from . import common
 from . import framework as fw
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 MEANS = (1.0, 0.9)
 P, EPS = 0.3, 0.01

@@ -1,19 +1,18 @@
 """sern_jax: SERN (Shannon-entropy-regularised neural contextual bandits) in JAX.
 
-Core modules (jax, numpy, optax, scipy only), re-exported lazily: ``import sern_jax`` imports
-none of them (so ``sern --help`` stays instant); ``sern_jax.executor`` imports that module on
-first use, like ``from sern_jax import executor``.
+The folder tree is the architecture (docs/ARCHITECTURE.md); imports point one way, down:
 
-* ``types``, ``policies``, ``schedules``, ``estimators``, ``problems``: the pure pieces;
-* ``simulate``: ``make_run(config) -> run(key, params)`` for one seed; ``fast_softmax``: the
-  exact fast runner for SERN softmax with local estimators;
-* ``executor``: ``run_seeds`` over thousands of seeds (chunks, threads, meshes);
-* ``theory``, ``stats``: closed forms of Theorems 1–5; intervals and Holm;
-* ``sharding``, ``io``: device meshes; run directories and checkpoints;
-* ``timing``, ``benchmarks``: the timing helper; the bandit benchmark and its NumPy reference
-  (``sern bench bandit``).
+* ``core``: problems, policies, schedules, estimators (jax, numpy, optax only);
+* ``analysis``: closed forms of Theorems 1-5 (``theory``) and statistics (``stats``);
+* ``learners``: exploration strategies as ``Learner(init, act, update)`` and their registry;
+* ``engine``: one seed (``simulate``), the fast runners, and ``drive.run_seeds`` over thousands;
+* ``grasp``: the MuJoCo/MJX grasp world, the quality network, online grasp learning;
+* ``experiment``: what ``sern regret`` and ``sern reproduce`` run;
+* ``infra``: run directories, Ray, meshes, timing, flag checks; ``bench``: ``sern bench``;
+* ``commands``: the ``sern`` CLI.
 
-The grasp layer (``sern_jax.grasp``) imports mujoco, mjx and flax and is not imported here.
+``import sern_jax`` imports none of them (so ``sern --help`` stays instant); each subpackage
+loads on first use, like ``from sern_jax.engine import drive``.
 """
 
 from __future__ import annotations
@@ -23,16 +22,14 @@ from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-_MODULES = ("types", "policies", "schedules", "estimators", "problems", "simulate",
-            "fast_softmax", "executor", "theory", "stats", "sharding", "io", "timing",
-            "benchmarks")
+_MODULES = ("core", "analysis", "learners", "engine", "grasp", "experiment", "infra",
+            "bench", "commands")
 
 __all__ = ["__version__", *_MODULES]
 
-if TYPE_CHECKING:  # for type checkers and IDEs; at run time the modules load lazily
-    from sern_jax import (benchmarks, estimators, executor, fast_softmax, io,  # noqa: F401
-                          policies, problems, schedules, sharding, simulate, stats, theory,
-                          timing, types)
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time the packages load lazily
+    from sern_jax import (analysis, bench, commands, core, engine, experiment,  # noqa: F401
+                          grasp, infra, learners)
 
 
 def __getattr__(name: str):

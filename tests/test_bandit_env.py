@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import policies, problems
-from sern_jax.bandit_env import BanditEnv, BanditState
-from sern_jax.types import Environment
+from sern_jax.core import policies, problems
+from sern_jax.core.bandit_env import BanditEnv, BanditState
+from sern_jax.core.types import Environment
 
 ENV = BanditEnv()
 N = 4000  # draws per estimate; 5 SE of a Bernoulli mean is at most 5 * 0.5 / sqrt(N) = 0.04

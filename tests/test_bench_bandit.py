@@ -51,7 +51,7 @@ def test_bench_bandit_thompson_json(capsys):
     assert code == 0
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert result["workload"]["policy"] == "thompson"
-    assert result["fast"]["engine_path"] == "sern_jax.fast_thompson.make_batched"
+    assert result["fast"]["engine_path"] == "sern_jax.engine.fast_thompson.make_batched"
     agree = result["regret_agreement"]
     assert result["run_seeds"]["fast"] and agree["run_seeds_counts_equal_fast"]
     assert agree["fast_general_counts_identical_fraction"] == 1.0
@@ -83,7 +83,7 @@ def test_bench_bandit_smpybandits_bad_input(argv, match, capsys):
 def test_bench_bandit_smpybandits_reference_or_a_named_refusal(capsys):
     """SMPyBandits' Thompson beside ours when the library is installed; without it the flag is
     refused in one line naming it and what to install (exit 2, before any compile)."""
-    from sern_jax import benchmarks
+    from sern_jax.bench import bandit as benchmarks
 
     argv = ["bench", "bandit", "--json", "--policy", "thompson", "--seeds", "16", "--horizon",
             "60", "--numpy-seeds", "0", "--repeats", "1", "--naive-repeats", "0",

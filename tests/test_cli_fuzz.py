@@ -212,8 +212,8 @@ def _main(argv) -> int:
 def _fake_dataset(root):
     """A D0 directory as `sern grasp dataset` leaves it: config.json (no shards needed: every
     pretrain case below is refused before the shards are read)."""
-    from sern_jax import io
-    from sern_jax.grasp import dataset
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import dataset
 
     config = dataset.DatasetConfig(num_objects=20, poses_per_object=4)
     io.save_json(root / "d0" / "config.json", {"config": config,
@@ -266,7 +266,7 @@ def test_edge_values_are_accepted(extra, tmp_path):
 
 
 def _learn_run_dir(tmp_path, **arrays):
-    from sern_jax import io
+    from sern_jax.infra import io
 
     run = tmp_path / "learn"
     run.mkdir()

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import contextual_problems as cp
+from sern_jax.core import contextual_problems as cp
 
 
 def _reference_wheel(x, delta):

@@ -1,4 +1,4 @@
-"""Ray scale-out (sern_jax.distributed, issue 20): a Ray run writes the same files as the
+"""Ray scale-out (sern_jax.infra.distributed, issue 20): a Ray run writes the same files as the
 single-process run, resumes, retries killed workers, and stops on a failing unit in one line.
 
 The default run uses one local Ray with 2 CPUs for the whole module (started once, ~4 s).
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sern_jax import distributed, io
+from sern_jax.infra import distributed, io
 from sern_jax.commands.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,7 +36,7 @@ TINY = ["regret", "--policies", "softmax,greedy", "-T", "300", "-S", "48", "--ch
 def test_importing_and_running_without_ray_never_imports_ray(tmp_path):
     code = (
         "import sys\n"
-        "import sern_jax, sern_jax.distributed, sern_jax.io\n"
+        "import sern_jax, sern_jax.infra.distributed, sern_jax.infra.io\n"
         "from sern_jax.commands.main import main\n"
         f"assert main({TINY + ['-S', '8', '--out', str(tmp_path / 'r')]!r}) == 0\n"
         "assert 'ray' not in sys.modules, 'ray was imported'\n"
@@ -135,7 +135,7 @@ def test_baselines_run_refuses_another_runs_directory_before_writing_meta(tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["meta.json", "run"]
 
     # the same run's checkpoint (the fingerprint the runner computes) is resumed, not refused
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     specs, theta0 = grid.hard_specs()
     config = grid.online_config(grid.learners(), grid.tuned_values(tmp_path, True),
@@ -171,7 +171,7 @@ def test_worker_env_sets_threads_cache_and_platform(tmp_path, monkeypatch):
 
 
 def test_executor_host_workers_honours_the_task_share(monkeypatch):
-    from sern_jax import executor
+    from sern_jax.engine import drive as executor
 
     monkeypatch.setenv("SERN_CPU_THREADS", "3")
     assert executor.host_workers() == 3
@@ -268,7 +268,7 @@ def test_cluster_doc_quotes_the_sampled_d0_run():
     import numpy as np
 
     from experiments import ray_scaling
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     doc = " ".join((ROOT / "docs" / "CLUSTER.md").read_text().split())
     readme = " ".join((ROOT / "README.md").read_text().split())
@@ -508,7 +508,7 @@ def test_regret_summaries_on_ray_equal_single_process(local_ray, tmp_path):
 
 
 def test_dataset_on_ray_equals_single_process_and_resumes(local_ray, tmp_path):
-    from sern_jax.grasp import dataset
+    from sern_jax.grasp.model import dataset
 
     config = dataset.DatasetConfig(num_objects=3, poses_per_object=2, objects_per_shard=1)
     one, par = tmp_path / "one", tmp_path / "ray"
@@ -545,7 +545,7 @@ def test_dataset_command_refuses_a_bad_ray_flag_in_one_line(tmp_path, capsys):
 @pytest.mark.slow  # ~50 s on the 2 cores; the library's Ray path (the one the command calls)
 # is tested in the default run: test_dataset_on_ray_equals_single_process_and_resumes
 def test_dataset_command_takes_the_ray_flags(local_ray, tmp_path, capsys):
-    from sern_jax.grasp import dataset
+    from sern_jax.grasp.model import dataset
 
     out = tmp_path / "d0"
     # the command's own --ray path against the library's single-process shards; one object
@@ -629,7 +629,7 @@ def test_baselines_run_on_ray_goes_through_the_learn_units(local_ray, tmp_path, 
     learn_units (whose results equal the single-process run: the learn test above); a
     unit failing stops it in one line (a stand-in for learn_units.run here)."""
     import experiments.grasp_baselines as grid
-    from sern_jax.grasp import learn_units
+    from sern_jax.grasp.online import learn_units
 
     seen = {}
 
@@ -665,7 +665,7 @@ def _unit_fails_for_box(config, spec, out_dir, theta0) -> None:
     """A learn unit that raises for the box and runs the real unit otherwise."""
     if spec.name == "box":
         raise RuntimeError("injected failure on the box")
-    from sern_jax.grasp import learn_units
+    from sern_jax.grasp.online import learn_units
 
     learn_units.run_unit(config, spec, out_dir, theta0)
 
@@ -673,7 +673,7 @@ def _unit_fails_for_box(config, spec, out_dir, theta0) -> None:
 def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
     """A learn unit whose worker process is killed (SIGKILL) right after the box's round-1
     checkpoint, on the first attempt; Ray's retry resumes the unit from that checkpoint."""
-    from sern_jax.grasp import learn_units, runner
+    from sern_jax.grasp.online import learn_units, runner
 
     marker = Path(out_dir).parent.parent / f"{spec.name}.killed"
     real = runner._save
@@ -694,7 +694,7 @@ def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
 def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch):
     """The tiny learning run in one process (``one``) and on Ray (``par``), the box's worker
     killed mid-unit once (retried); checks they are equal; returns (one, par, single arrays)."""
-    from sern_jax.grasp import learn_units
+    from sern_jax.grasp.online import learn_units
 
     one, par = tmp_path / "one", tmp_path / "ray"
     assert main(LEARN + ["--out", str(one)]) == 0
@@ -731,7 +731,7 @@ def test_learn_on_ray_equals_single_process_with_a_killed_worker_retried(
 @pytest.mark.slow  # four more learning runs on Ray (~2 min on the 2 cores beside the suite)
 def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run(
         local_ray, tmp_path, capsys, monkeypatch):
-    from sern_jax.grasp import learn_units
+    from sern_jax.grasp.online import learn_units
 
     one, par, single = _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys,
                                                                      monkeypatch)
@@ -760,7 +760,7 @@ def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run
 
     # a run left part-way without --ray (its checkpoint after round 1) continues on Ray:
     # split into units at round 2, each replays round 1 and runs round 2
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     saved = _arrays(one / "checkpoint.npz")
     results = runner.RoundResults(*(saved[f] for f in runner.RoundResults._fields))
@@ -846,7 +846,7 @@ def test_failing_unit_stops_the_run_in_one_line_and_keeps_finished_units(local_r
 
 def test_failing_unit_through_the_command_is_exit_1_one_line(local_ray, tmp_path, capsys,
                                                              monkeypatch):
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
 
     # the units point at a function that raises (it travels by value, from this module)
     monkeypatch.setattr(script_module("experiments", "regret"), "compute_chunk",
@@ -922,7 +922,7 @@ def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
 
         # a tiny D0 across both nodes (one object per shard, SPREAD), against this process's
         d0_one, d0_par = tmp_path / "d0-one", tmp_path / "d0-ray"
-        from sern_jax.grasp import dataset
+        from sern_jax.grasp.model import dataset
 
         config = dataset.DatasetConfig(num_objects=4, poses_per_object=1, objects_per_shard=1)
         dataset.generate(config, d0_one, progress=False, log=lambda s: None)

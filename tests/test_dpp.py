@@ -1,4 +1,4 @@
-"""Tests for sern_jax.dpp: exact k-DPP sampling, greedy MAP, RFF lift, core-set selection.
+"""Tests for sern_jax.core.dpp: exact k-DPP sampling, greedy MAP, RFF lift, core-set selection.
 
 Statistical tests run at a stated false-alarm rate ALPHA = 1e-3 per test (Bonferroni over
 items); the keys are fixed (fold_in of key(0)), so each run is deterministic, and the rate
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sern_jax import dpp
+from sern_jax.core import dpp
 
 ALPHA = 1e-3
 NUM_SAMPLES = 4000

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import estimators as E
+from sern_jax.core import estimators as E
 
 ORACLE = E.OracleParams(beta=jnp.asarray(0.5), oracle_eps=jnp.asarray(0.01),
                         flip_q=jnp.asarray(0.5), pinned_arm=jnp.asarray(1, jnp.int32))

@@ -15,8 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import executor, problems
-from sern_jax import simulate as sim
+from sern_jax.engine import drive as executor
+from sern_jax.core import problems
+from sern_jax.engine import simulate as sim
 
 CFG = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=5, horizon=300,
                     num_checkpoints=12)
@@ -117,7 +118,7 @@ SHARD_SCRIPT = textwrap.dedent("""
     cfg = sim.RunConfig(num_arms=6, horizon=200, num_checkpoints=8)
     prob = problems.bernoulli([0.1, 0.3, 0.5, 0.6, 0.7, 0.75])
     params = sim.default_params(cfg, prob, alpha0=0.1)
-    from sern_jax.sharding import seed_mesh
+    from sern_jax.infra.sharding import seed_mesh
     mesh = seed_mesh(4)
     sharded = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh)
     plain = executor.run_seeds(cfg, params, seed=3, num_seeds=103)
@@ -255,7 +256,7 @@ def test_package_reexports_core_modules_lazily():
             module = getattr(sern_jax, name)
             missing = [n for n in module.__all__ if not hasattr(module, n)]
             assert not missing, (name, missing)
-        assert sern_jax.executor.run_seeds
+        assert sern_jax.engine.drive.run_seeds
         assert not {"mujoco", "flax"} & set(sys.modules), "a core module imported mujoco/flax"
     """)
     res = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,

@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import fast_softmax as fs
-from sern_jax import problems
-from sern_jax import simulate as sim
+from sern_jax.engine import fast_softmax as fs
+from sern_jax.core import problems
+from sern_jax.engine import simulate as sim
 
 # (estimator, schedule, K, T, random_means, α0): T spans several 64-round blocks + remainders.
 F64_CASES = [

@@ -1,4 +1,4 @@
-"""sern_jax.io: atomic writes keep the usual file mode; verified npz files; run locks."""
+"""sern_jax.infra.io: atomic writes keep the usual file mode; verified npz files; run locks."""
 
 import os
 import signal
@@ -11,7 +11,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from sern_jax import io
+from sern_jax.infra import io
 
 
 def test_files_get_the_umask_mode_not_0600(tmp_path):

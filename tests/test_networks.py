@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import contextual_problems as cp
-from sern_jax import networks
+from sern_jax.core import contextual_problems as cp
+from sern_jax.engine import networks
 
 
 def test_logit_is_linear_in_the_features():

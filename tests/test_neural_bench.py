@@ -5,9 +5,9 @@ import jax
 import numpy as np
 import pytest
 
-from sern_jax import neural_bench as nb
-from sern_jax import neural_runner as nr
-from sern_jax.simulate import seed_keys
+from sern_jax.bench import neural as nb
+from sern_jax.engine import neural as nr
+from sern_jax.engine.simulate import seed_keys
 
 
 def test_python_loop_reproduces_the_runner():

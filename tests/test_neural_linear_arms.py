@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import contextual_problems as cp
-from sern_jax import networks
-from sern_jax import neural_runner as nr
+from sern_jax.core import contextual_problems as cp
+from sern_jax.engine import networks
+from sern_jax.engine import neural as nr
 from sern_jax.learners import base, registry
 from sern_jax.learners import neural_linear as nl
 
@@ -111,7 +111,7 @@ def test_neural_lints_batched_equals_unbatched_on_the_wheel():
     run = nr.make_run(nr.NeuralRunConfig(horizon=horizon, update_every=10, num_checkpoints=2),
                       problem, registry.make("neural_lints", model, train), model)
     many = nr.run_seeds(run, seed=3, num_seeds=4, chunk_size=4)
-    from sern_jax import simulate as sim
+    from sern_jax.engine import simulate as sim
     one = jax.jit(run)(sim.seed_keys(jax.random.key(3), 1, 2)[0])
     np.testing.assert_array_equal(np.asarray(one.counts), many.counts[2])
     np.testing.assert_allclose(np.asarray(one.regret_rb), many.regret_rb[2], rtol=1e-5)

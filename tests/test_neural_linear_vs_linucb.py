@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sern_jax import contextual_problems as cp
-from sern_jax import networks
-from sern_jax import neural_runner as nr
-from sern_jax import simulate as sim
+from sern_jax.core import contextual_problems as cp
+from sern_jax.engine import networks
+from sern_jax.engine import neural as nr
+from sern_jax.engine import simulate as sim
 from sern_jax.learners import base, registry
 
 pytestmark = pytest.mark.slow  # ~3 min on the shared 2 cores (two runner compiles); the

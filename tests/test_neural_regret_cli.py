@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import io
+from sern_jax.infra import io
 from sern_jax.commands import main as cli
 
 ARGS = ["regret", "--estimator", "neural", "--problem", "wheel", "--delta", "0.5",
@@ -101,7 +101,7 @@ def test_neural_linear_options_enter_the_fingerprint_only_when_set():
     fingerprint, so they resume; another value is another run."""
     import dataclasses
 
-    from experiments.neural_regret import NeuralRegretExperiment as Exp
+    from sern_jax.experiment.neural_regret import NeuralRegretExperiment as Exp
 
     nl_pol = ("neural_lints", "uniform")
     legacy = Exp(policies=nl_pol, nl_sigma2="arm", nl_prior_mean="network")
@@ -130,8 +130,8 @@ def test_delta_sweep_compiles_once_and_matches_single_runs(run_dir, tmp_path):
     the single --delta 0.5 run."""
     import dataclasses
 
-    from experiments import neural_regret as nreg
-    from sern_jax import neural_runner as nr
+    from sern_jax.experiment import neural_regret as nreg
+    from sern_jax.engine import neural as nr
 
     out = tmp_path / "sweep"
     argv = [a for a in ARGS]

@@ -8,10 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import contextual_problems as cp
-from sern_jax import networks
-from sern_jax import neural_runner as nr
-from sern_jax import simulate as sim
+from sern_jax.core import contextual_problems as cp
+from sern_jax.engine import networks
+from sern_jax.engine import neural as nr
+from sern_jax.engine import simulate as sim
 from sern_jax.learners import base, registry
 
 T, E = 60, 10

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sern_jax import io, stats
+from sern_jax.infra import io
+from sern_jax.analysis import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results"
@@ -31,7 +32,7 @@ PAIRS = (("pooled_network", "arm_network"), ("arm_zero", "arm_network"),
 
 
 def _ratio_interval(num, den, num_boot=2000, seed=0):
-    """experiments/neural_regret.py's paired seed-bootstrap, restated."""
+    """sern_jax/experiment/neural_regret.py's paired seed-bootstrap, restated."""
     rng = np.random.default_rng(seed)
     idx = rng.integers(0, num.size, (num_boot, num.size))
     boots = num[idx].mean(1) / den[idx].mean(1)

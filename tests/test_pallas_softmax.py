@@ -1,4 +1,4 @@
-"""The fused Pallas kernel (sern_jax.pallas_softmax) makes the engine's draws and outputs.
+"""The fused Pallas kernel (sern_jax.engine.pallas_softmax) makes the engine's draws and outputs.
 
 Run here in Pallas' interpreter (CPU): the kernel's jaxpr evaluated by XLA:CPU, i.e. the same
 code that Triton compiles on a GPU, op for op. Against ``fast_softmax`` every output is equal
@@ -21,10 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import benchmarks, problems
-from sern_jax import fast_softmax as fs
-from sern_jax import pallas_softmax as ps
-from sern_jax import simulate as sim
+from sern_jax.bench import bandit as benchmarks
+from sern_jax.core import problems
+from sern_jax.engine import fast_softmax as fs
+from sern_jax.engine import pallas_softmax as ps
+from sern_jax.engine import simulate as sim
 from sern_jax.commands import main as cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

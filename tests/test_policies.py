@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sern_jax import policies
+from sern_jax.core import policies
 
 K = 6
 estimates = hnp.arrays(np.float32, (K,), elements=st.floats(0, 1, width=32))

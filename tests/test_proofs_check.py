@@ -10,7 +10,7 @@ import json
 import pytest
 
 from sern_jax.commands import check as cli
-from sern_jax.commands._scripts import script_module
+from sern_jax.commands.scripts import script_module
 
 # the modules `sern check` uses (sern_jax.proofs_check installed), so the cached runs are shared
 framework = script_module("proofs_check", "framework")

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from sern_jax import stats as st
-from sern_jax.commands._scripts import script_module
+from sern_jax.analysis import stats as st
+from sern_jax.commands.scripts import script_module
 
 framework = script_module("proofs_check", "framework")
 

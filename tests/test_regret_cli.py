@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import io
+from sern_jax.infra import io
 from sern_jax.commands import main as cli
 
 ARGS = ["regret", "--policies", "softmax,greedy", "--arms", "4", "--horizon", "200",
@@ -73,7 +73,7 @@ def test_bad_input_names_the_value(bad, match, tmp_path, capsys):
 
 
 def test_summary_saves_theorem1_floor_for_the_figure(run_dir):
-    # experiments/regret.py saves α(T), c = e^{-1/α}/K and π_min; the figure only reads them.
+    # sern_jax/experiment/regret.py saves α(T), c = e^{-1/α}/K and π_min; the figure only reads them.
     floor = io.load_json(run_dir / "summary.json")["theorem1"]
     assert floor["alpha"] == pytest.approx(0.1)  # constant schedule, default α0
     assert floor["c"] == pytest.approx(np.exp(-1 / 0.1) / 4, rel=1e-12)

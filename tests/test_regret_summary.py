@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import executor, io
+from sern_jax.engine import drive as executor
+from sern_jax.infra import io
 from sern_jax.commands import main as cli
 
 ARGS = ["regret", "--policies", "softmax,greedy", "--arms", "4", "--horizon", "200",

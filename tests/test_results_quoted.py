@@ -135,7 +135,7 @@ def test_grid_summary_is_what_the_cells_give(grid):
 
 
 def test_grid_cells_were_made_with_the_shipped_theta0_in_their_worlds():
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     theta0 = artifacts.load_theta0()
     hard = artifacts.hard_set(theta0, 6)["objects"]
@@ -353,7 +353,7 @@ def test_screen_with_fresh_trials():
         "tless_part_b": (0.84, 1.00, 0.89, False), "tless_part_c": (0.55, 1.00, 0.95, True),
         "detergent_bottle": (0.23, 0.77, 0.70, False)}
     assert set(rows) == set(quoted)
-    from sern_jax.grasp import pretrain
+    from sern_jax.grasp.model import pretrain
 
     for name, (g, b, f, hard) in quoted.items():
         r = rows[name]
@@ -414,7 +414,8 @@ def test_committed_transfer_summary_is_what_the_per_seed_files_give(transfer):
 
 def test_headline_runs_were_made_with_the_shipped_theta0_and_trial():
     """A per-seed file made before the trial changed (another θ0) fails here."""
-    from sern_jax.grasp import artifacts, scene, sim
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import scene, sim
 
     shipped = artifacts.load_theta0().fingerprint
     old = artifacts.load_theta0(grasp_sensitivity.THETA0_6N_DIR).fingerprint
@@ -746,7 +747,9 @@ def test_transfer_prose_quoted(transfer):
     assert (f"exit 0 after {rsecs} s; the restart (MJX compiles, the replay of rounds 1–13's updates) "
             f"and round 14 were done {rfirst[15]} s after the script started, rounds 15–19 took "
             f"{round((rfirst[20] - rfirst[15]) / 5)} s each") in sec
-    from sern_jax.grasp import artifacts, objects as objs, runner as rn
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import objects as objs
+    from sern_jax.grasp.online import runner as rn
     shipped = artifacts.load_theta0()
     cfg = rn.OnlineConfig(num_seeds=5, rounds=20, backend="mjx")
     fp = rn.run_fingerprint(cfg, [objs.make_object(n) for n in transfer["objects"]], shipped)
@@ -814,7 +817,7 @@ def test_regret_accounting_quoted(tmp_path):
     d = json.loads((RESULTS / "regret" / "regret.json").read_text())
     assert (d["config"]["regret_trials"], d["config"]["regret_grasps"]) == (4, 2)
     assert round(d["seconds"]) == 690
-    assert d["theta0_digest"] == __import__("sern_jax.grasp.artifacts", fromlist=["x"]
+    assert d["theta0_digest"] == __import__("sern_jax.grasp.model.artifacts", fromlist=["x"]
                                             ).load_theta0().fingerprint
     pr = gl.load_results(RESULTS / "regret")["regret"]["pseudo_regret"]
     assert int((pr[1:] < 0).sum()) == 65 and pr[1:].size == 225

@@ -502,8 +502,8 @@ def test_run_refuses_a_ray_unit_of_another_run_before_writing_meta(tmp_path, cap
     what a Ray run leaves, also one stopped before any join): a unit of a reported object
     with another fingerprint is refused in one line, exit 2, before meta.json is touched;
     the same settings' unit (and a unit of an object not run) passes to the runner."""
-    from sern_jax import io
-    from sern_jax.grasp import learn_units, runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.online import learn_units, runner
 
     argv = ["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds", "2",
             "--rounds", "1", "--no-progress"]
@@ -544,7 +544,7 @@ def test_run_refuses_a_ray_unit_of_another_run_before_writing_meta(tmp_path, cap
 
 def _fake_comparison(root, learners, rng, regret=True):
     """A comparison's files as run/tune write them (2 objects, 3 seeds, 2 rounds)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     r1, o, q, s, e = 3, 2, len(learners), 3, 4
     root.mkdir(parents=True)
@@ -581,7 +581,7 @@ def test_merge_replaces_learners_only_when_the_reference_is_bit_identical(tmp_pa
     configs), every other learner is kept, and the rerun's sern must equal the
     comparison's bit for bit in results, choices, rewards and tuning; a sern differing in
     one number is refused in one line, exit 2, nothing written."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     rng = np.random.default_rng(0)
     out, new = tmp_path / "out", tmp_path / "new"
@@ -744,7 +744,8 @@ def test_ensemble_shared_against_whole_networks_and_sern_against_itself():
     """The paired differences the section quotes: shared-heads rerun minus the table's
     whole-network ensemble over the 20 seeds; at M = 5 on the tuning objects; and the
     rerun's SERN minus the table's (not bit for bit: counts of differing choices)."""
-    from sern_jax import io, stats
+    from sern_jax.infra import io
+    from sern_jax.analysis import stats
 
     a, b, ma, _ = _shared_rerun()
     q = ma["learners"].index("ensemble_ts")
@@ -791,8 +792,8 @@ def test_run_refuses_a_run_made_under_the_former_ensemble_default(tmp_path, caps
     shared-heads default: ``run`` compares the learner configs meta.json recorded (a
     missing ensemble_heads = networks) and refuses in one line, exit 2, nothing written;
     a run recorded with shared heads resumes."""
-    from sern_jax import io
-    from sern_jax.grasp import runner
+    from sern_jax.infra import io
+    from sern_jax.grasp.online import runner
 
     argv = ["run", "--out", str(tmp_path), "--untuned", "--objects", "1", "--seeds", "2",
             "--rounds", "1", "--no-progress"]
@@ -914,7 +915,7 @@ def test_rerun_against_the_replaced_table_and_the_pair_run():
     ensemble_ts's row then and now, the other learners' changed choices and moved means
     (from the two checkpoints and summaries), the same resolved sets, and SERN's changed
     choices against the pair run (ensemble_shared/)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     text = " ".join(SECTION.replace("−", "-").split())
     new, old = (json.loads((d / "summary.json").read_text()) for d in (SRC, OLD))

@@ -80,7 +80,8 @@ def _theory_section():
 
 
 def test_theory_runs_were_made_with_the_shipped_theta0_and_trial():
-    from sern_jax.grasp import artifacts, sim
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import sim
 
     for d in (THEORY, RESULTS / "theory_grasping_other"):
         res = json.loads((d / "results.json").read_text())
@@ -93,7 +94,7 @@ def test_theory_objects_are_chosen_by_todays_screen():
     """The first three objects of the shipped hard set: the one that meets the rule, then
     the lowest θ0 greedy success among those whose fresh best is >= 0.8; the other run
     takes the remaining three."""
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     hard = artifacts.hard_set(artifacts.load_theta0())
     res = json.loads((THEORY / "results.json").read_text())
@@ -164,7 +165,7 @@ def test_theory_numbers_quoted():
             for o in range(3) for c in range(4)]
     assert sum(int(v[0] == 256 and v[1] == 256) for v in deep) == 8
     assert deep[2].tolist() == [90, 90, 90, 90]  # the triangular_prism pose of identical 90s
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     assert round(float(stats.clopper_pearson(256, 256, 0.95, "lower")[0]), 3) == 0.988
     sp = s["delta2_split"]
@@ -194,7 +195,7 @@ def test_theory_error_change_from_theta0_quoted():
     """Per seed, the context-mean error at n = 160 minus at n = 0, per object, with Student-t
     intervals over the 4 seeds and Holm over the three objects: tless_part_a does not fall
     below θ0's, detergent_bottle falls slightly but resolved (not "no reduction at all")."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     z = np.load(THEORY / "per_context.npz")
     names = [str(n) for n in z["objects"]]
@@ -288,7 +289,7 @@ def test_theory_other_objects_quoted():
     assert sum(int(v[0] == 256 and v[1] == 256) for v in deep) == 5
     sp = s["delta2_split"]
     assert (sp["resolved_holm"], sp["contexts"]) == (1, 12)
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     split = z["split"].reshape(-1, 3)
     reject, _ = stats.holm(split[:, 1], alpha=0.05)
@@ -358,7 +359,8 @@ def test_forgetting_summary_is_what_the_per_seed_file_gives():
 
 
 def test_forgetting_was_made_with_the_shipped_theta0_and_trial():
-    from sern_jax.grasp import artifacts, sim
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.world import sim
 
     cfg = json.loads((FORGET / "config.json").read_text())
     assert cfg["theta0"] == artifacts.load_theta0().fingerprint
@@ -474,7 +476,7 @@ def _agreement_rows():
 def test_agreement_20N_quoted():
     from scipy import stats as sps
 
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     rows = _agreement_rows()
     assert tuple(rows) == tuple(sorted(AGREE_ORDER))
@@ -546,7 +548,7 @@ def test_trial_rates_20N_quoted():
 def test_candidate_success_under_20N_quoted():
     """docs/GRASP.md's 'With the antipodal candidates' figures under the 20 N trial are the
     shipped screen's mean candidate success."""
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     rows = {r["object"]: r for r in artifacts.load_theta0().screen["objects"]}
     doc = " ".join(GRASP_DOC.split())
@@ -610,7 +612,7 @@ def test_theory_6N_comparison_quoted():
 
 def test_forgetting_triangular_prism_quoted():
     from experiments.core_set_forgetting import summarise
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     d = RESULTS / "forgetting_triangular_prism"
     res = json.loads((d / "results.json").read_text())

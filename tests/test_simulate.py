@@ -6,8 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import executor, problems
-from sern_jax import simulate as sim
+from sern_jax.engine import drive as executor
+from sern_jax.core import problems
+from sern_jax.engine import simulate as sim
 
 CFG = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=5, horizon=300,
                     num_checkpoints=12)

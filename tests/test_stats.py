@@ -1,4 +1,4 @@
-"""Tests for sern_jax.stats against exact sums, definitions and simulated coverage."""
+"""Tests for sern_jax.analysis.stats against exact sums, definitions and simulated coverage."""
 
 import math
 from fractions import Fraction
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from sern_jax import stats as st
+from sern_jax.analysis import stats as st
 
 
 def _binom_sf_exact(k, n, p):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from sern_jax import stats as st
+from sern_jax.analysis import stats as st
 
 
 @pytest.mark.parametrize("n", [2, 5, 20])

@@ -7,8 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import executor, problems
-from sern_jax import simulate as sim
+from sern_jax.engine import drive as executor
+from sern_jax.core import problems
+from sern_jax.engine import simulate as sim
 
 CFG = sim.RunConfig(num_arms=6, horizon=300, num_checkpoints=8, random_means=True)
 PARAMS = sim.default_params(CFG, problems.bernoulli([0.5] * 6), alpha0=0.1)

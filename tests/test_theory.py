@@ -1,4 +1,4 @@
-"""Tests for sern_jax.theory: closed forms against brute force and the audit's tables."""
+"""Tests for sern_jax.analysis.theory: closed forms against brute force and the audit's tables."""
 
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from sern_jax import theory as th
+from sern_jax.analysis import theory as th
 
 
 def test_pi_min_is_softmax_minimum_and_c_is_below():
@@ -166,7 +166,7 @@ def test_host_alpha_is_the_traced_schedule_and_feeds_theorem1():
     import jax
     import jax.numpy as jnp
 
-    from sern_jax import schedules
+    from sern_jax.core import schedules
 
     with jax.enable_x64():
         for kind in schedules.SCHEDULE_NAMES:

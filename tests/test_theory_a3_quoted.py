@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from scipy import stats as sps
 
-from sern_jax import stats
+from sern_jax.analysis import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORT = ROOT / "experiments" / "results" / "theory_neural" / "check_n1_a3_full.json"

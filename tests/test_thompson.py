@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from sern_jax import executor, fast_thompson, prng, problems
-from sern_jax import simulate as sim
+from sern_jax.engine import drive as executor, fast_thompson
+from sern_jax.core import prng, problems
+from sern_jax.engine import simulate as sim
 
 N = 20_000  # draws per parameter pair
 

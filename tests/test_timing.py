@@ -1,11 +1,11 @@
-"""The one timing helper (sern_jax.timing) and the one machine description (io.machine)."""
+"""The one timing helper (sern_jax.infra.timing) and the one machine description (io.machine)."""
 
 import time
 
 import jax.numpy as jnp
 import pytest
 
-from sern_jax import io, timing
+from sern_jax.infra import io, timing
 
 
 def test_time_calls_counts_calls_and_times_the_first_apart():

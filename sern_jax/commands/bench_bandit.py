@@ -1,7 +1,7 @@
 """``sern bench bandit``: seed-rounds per second of SERN softmax, side by side with NumPy.
 
 The workload, the four ways of running it (``run_seeds``, ``fast``, ``general``, ``numpy``) and
-the JSON fields are :mod:`sern_jax.benchmarks` (``bandit_benchmark``); this module parses and
+the JSON fields are :mod:`sern_jax.bench.bandit` (``bandit_benchmark``); this module parses and
 checks the flags, calls it, and prints one JSON object (``--json``) or a short table.
 """
 
@@ -22,7 +22,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "bandit",
         help="SERN softmax throughput (JAX fast/general paths vs NumPy) on one workload",
         description="Seed-rounds per second of SERN softmax, side by side with NumPy "
-                    "(sern_jax.benchmarks.bandit_benchmark). Prints one JSON object with --json.",
+                    "(sern_jax.bench.bandit.bandit_benchmark). Prints one JSON object with --json.",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--arms", type=int, default=64, help="K (default 64)")
@@ -50,7 +50,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="seeds of SMPyBandits' Thompson on the same instance, one at a time "
                         "(--policy thompson; needs SMPyBandits installed; default 0 skips)")
     p.add_argument("--pallas", action="store_true",
-                   help="also time the fused Pallas kernel (sern_jax.pallas_softmax; softmax, "
+                   help="also time the fused Pallas kernel (sern_jax.engine.pallas_softmax; softmax, "
                         "one GPU) and compare its outputs with the fast path's seed by seed")
     p.set_defaults(func=run)
     return p
@@ -92,7 +92,7 @@ def _validate(args) -> None:
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     if args.smpybandits_seeds:
-        from sern_jax import benchmarks
+        from sern_jax.bench import bandit as benchmarks
 
         try:
             benchmarks.smpybandits_thompson()
@@ -103,7 +103,7 @@ def _validate(args) -> None:
             raise ValueError("--pallas needs --policy softmax (the kernel is SERN softmax's)")
         if args.devices > 1:
             raise ValueError("--pallas runs on one device: use --devices 0 or 1")
-        from sern_jax import pallas_softmax
+        from sern_jax.engine import pallas_softmax
 
         if not 2 <= args.arms <= pallas_softmax.MAX_ARMS or args.arms & (args.arms - 1):
             raise ValueError(f"--pallas needs --arms a power of two in [2, "
@@ -116,7 +116,7 @@ def _validate(args) -> None:
 
 
 def _workload(args):
-    from sern_jax import benchmarks
+    from sern_jax.bench import bandit as benchmarks
 
     return benchmarks.BanditWorkload(
         arms=args.arms, horizon=args.horizon, seeds=args.seeds, alpha=args.alpha,
@@ -129,7 +129,8 @@ def _workload(args):
 
 def _check_memory(workload) -> None:
     """Refuses a workload whose outputs and per-seed state cannot fit in this machine's memory."""
-    from sern_jax import benchmarks, executor
+    from sern_jax.bench import bandit as benchmarks
+    from sern_jax.engine import drive as executor
 
     need = benchmarks.bandit_memory_bytes(workload)
     avail = executor.available_memory_bytes()
@@ -142,7 +143,7 @@ def _check_memory(workload) -> None:
 def run(args) -> int:
     """Runs the benchmark; prints one JSON object (``--json``) or a short table."""
     _validate(args)
-    from sern_jax import benchmarks
+    from sern_jax.bench import bandit as benchmarks
 
     workload = _workload(args)
     _check_memory(workload)

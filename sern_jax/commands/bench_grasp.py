@@ -2,7 +2,7 @@
 
 The measurements (trials/s per backend and batch, depth images/s, candidate sets/s,
 contexts/s, a time split per stage, the quality network's rates, and with ``--agreement N``
-the paired native-vs-MJX agreement) are :mod:`sern_jax.grasp.benchmarks`
+the paired native-vs-MJX agreement) are :mod:`sern_jax.bench.grasp`
 (``grasp_benchmark``, ``measure_agreement``); this module parses and checks the flags, calls
 them, prints the JSON and writes ``--out``. Every figure is measured in this run on this
 machine (``machine`` in the output).
@@ -98,11 +98,11 @@ def _validate(args) -> None:
     if args.threads is not None and not 1 <= args.threads <= 4096:
         raise ValueError(f"--threads must lie in [1, 4096], got {args.threads}")
     if args.out is not None:
-        from sern_jax.commands import validate
+        from sern_jax.infra import validate
 
         validate.out_file(args.out, "--out")  # a temporary file is tried where it would go
     if args.agreement:
-        from sern_jax.grasp import objects as objects_lib
+        from sern_jax.grasp.world import objects as objects_lib
 
         names = [n for n in args.agreement_objects.split(",") if n]
         if not names:
@@ -119,8 +119,8 @@ def run(args) -> int:
 
     import_mjx_quietly()
     _validate(args)
-    from sern_jax.grasp import benchmarks
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.bench import grasp as benchmarks
+    from sern_jax.grasp.world import objects as objects_lib
 
     try:
         quick = args.quick

@@ -1,5 +1,5 @@
 """``sern bench neural``: seed-rounds per second of the neural runner beside a per-seed Python
-loop over the same JAX functions (:mod:`sern_jax.neural_bench`).
+loop over the same JAX functions (:mod:`sern_jax.bench.neural`).
 
 Default workload (issue 19): the wheel bandit at δ = 0.95, Neural-Linear Thompson sampling
 on a one-hidden-layer MLP (50 units) updated every 50 rounds by 20 Adam steps of 64 rows,
@@ -18,7 +18,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Registers ``neural`` under ``sern bench``."""
-    from sern_jax.neural_bench import NeuralBenchConfig
+    from sern_jax.bench.neural import NeuralBenchConfig
 
     d = NeuralBenchConfig.__dataclass_fields__
     p = subparsers.add_parser(
@@ -53,7 +53,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    from sern_jax import neural_bench
+    from sern_jax.bench import neural as neural_bench
 
     try:
         hidden = tuple(int(w) for w in args.hidden.split(",") if w.strip())

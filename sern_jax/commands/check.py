@@ -59,7 +59,7 @@ def _validate(args) -> None:
         raise ValueError(f"--alpha must lie in (0, 0.5), got {args.alpha}")
     if not 0 <= args.seed <= 2**32 - 1:
         raise ValueError(f"--seed must lie in [0, 2^32 - 1], got {args.seed}")
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     # tried for real (os.access says yes to root on /proc): nothing is left behind
     validate.out_dir(args.out, "--out")
@@ -70,7 +70,7 @@ def _validate(args) -> None:
 
 def run(args) -> int:
     """Entry point of ``sern check``; returns the exit status."""
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
 
     registry = script_module("proofs_check", "registry")
 
@@ -86,7 +86,7 @@ def run(args) -> int:
 
     fw = script_module("proofs_check", "framework")
     report = script_module("proofs_check", "report")
-    from sern_jax import io
+    from sern_jax.infra import io
 
     name = args.name or ("check-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
                          + ("-quick" if args.quick else ""))

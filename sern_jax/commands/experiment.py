@@ -32,7 +32,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Runs ``experiments.<NAME>.main(ARGS)``; returns its exit status."""
-    from sern_jax.commands._scripts import experiment_names, script_module
+    from sern_jax.commands.scripts import experiment_names, script_module
 
     names = experiment_names()
     if args.list or not args.name:

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from sern_jax.commands import validate
+from sern_jax.infra import validate
 
 __all__ = [
     "add_dataset_parser",
@@ -48,9 +48,9 @@ def _check_seed(seed: int) -> None:
 
 
 def _check_size(est, out) -> None:
-    """Refuses a run whose estimate (:mod:`sern_jax.grasp.budget`) cannot fit this machine;
+    """Refuses a run whose estimate (:mod:`sern_jax.grasp.online.budget`) cannot fit this machine;
     prints the estimate when the run is long."""
-    from sern_jax.grasp import budget
+    from sern_jax.grasp.online import budget
 
     budget.check(est, out=out)
     if est.seconds > 600:
@@ -85,7 +85,7 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/d0", help="dataset directory")
     p.add_argument("--no-progress", action="store_true")
-    from sern_jax import distributed  # --ray [ADDRESS]: shards as Ray tasks (issue 20)
+    from sern_jax.infra import distributed  # --ray [ADDRESS]: shards as Ray tasks (issue 20)
 
     distributed.add_arguments(p)
     p.set_defaults(func=_run_dataset)
@@ -93,13 +93,14 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _run_dataset(args) -> int:
-    from sern_jax import distributed
+    from sern_jax.infra import distributed
 
     _check_seed(args.seed)
     _check_out(args.out)
     ray = distributed.from_args(args)  # None without --ray
     distributed.check_backend(args.backend, ray)  # mjx tasks on a GPU only
-    from sern_jax.grasp import budget, dataset
+    from sern_jax.grasp.online import budget
+    from sern_jax.grasp.model import dataset
 
     try:
         shard = getattr(args, "objects_per_shard", None)
@@ -174,8 +175,10 @@ def _run_pretrain(args) -> int:
                          "`sern grasp dataset --out DIR`")
     if args.install:
         _check_out(str(_data_dir()), "--install")
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, budget, dataset, objects, pretrain
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts, dataset, pretrain
+    from sern_jax.grasp.online import budget
+    from sern_jax.grasp.world import objects
 
     try:
         config = pretrain.PretrainConfig(
@@ -227,7 +230,7 @@ def _pretrain_flags(message: str) -> str:
 
 
 def _data_dir() -> Path:
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     return Path(artifacts.DATA_DIR)
 
@@ -270,7 +273,7 @@ _MESH_UNITS = ("auto", "m", "cm", "mm")
 
 
 def _specs(names, meshes, default_names, units="auto"):
-    from sern_jax.grasp import objects
+    from sern_jax.grasp.world import objects
 
     names = list(names) or ([] if meshes else list(default_names))
     specs = [objects.resolve_object(n, units=units) for n in names]
@@ -286,8 +289,10 @@ def _specs(names, meshes, default_names, units="auto"):
 
 
 def _run_screen(args) -> int:
-    from sern_jax import io
-    from sern_jax.grasp import artifacts, budget, objects, pretrain
+    from sern_jax.infra import io
+    from sern_jax.grasp.model import artifacts, pretrain
+    from sern_jax.grasp.online import budget
+    from sern_jax.grasp.world import objects
 
     _check_seed(args.seed)
     _check_file_out(args.json_out)
@@ -359,9 +364,7 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
     p.add_argument("--no-figures", action="store_true")
     p.add_argument("--no-progress", action="store_true")
-    from sern_jax import (
-        distributed,  # --ray [ADDRESS]: one Ray task per object (issue 20)
-    )
+    from sern_jax.infra import distributed
 
     distributed.add_arguments(p)
     p.set_defaults(func=lambda args: run_learn(args, make_figures=make_figures))
@@ -492,7 +495,7 @@ def _check_run_dir(out: Path, fingerprint: str) -> None:
     the regret commands make): its checkpoint (verified; a damaged file is named in one line)
     and its ``config.json`` must both hold this run's fingerprint, so another run's directory,
     a learn run's or any other command's, is left untouched, and the same settings resume."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     io.check_run_dir(out, fingerprint, what="learning run", checkpoint="checkpoint.npz",
                      advice="delete it to restart the run from round 0 (or choose another "
@@ -502,13 +505,13 @@ def _check_run_dir(out: Path, fingerprint: str) -> None:
 def check_learn_args(args, num_objects: int | None = None):
     """What ``sern grasp learn`` can check before θ0 and the objects are loaded: the output
     paths, the float flags (:func:`_check_learn_values`), the OnlineConfig and, when the
-    number of objects is known, the run's size (:mod:`sern_jax.grasp.budget`). Returns the
+    number of objects is known, the run's size (:mod:`sern_jax.grasp.online.budget`). Returns the
     OnlineConfig. ``sern reproduce`` calls it before its first part runs."""
     _check_out(args.out)
     _check_file_out(args.json_out)
     policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
     _check_learn_values(args, policies)
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     hyper = learner_hyperparameters(args)
     from sern_jax.learners import registry
@@ -536,11 +539,12 @@ def check_learn_args(args, num_objects: int | None = None):
 
 def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     config = check_learn_args(args)
-    from sern_jax import distributed, io
+    from sern_jax.infra import distributed, io
 
     ray = distributed.from_args(args)  # None without --ray
     distributed.check_backend(config.backend, ray)  # mjx tasks on a GPU only
-    from sern_jax.grasp import artifacts, runner
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.online import runner
 
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
     # such even where θ0 is missing); the default objects come from θ0's screen
@@ -562,7 +566,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
             res = runner.run(config, specs, out, theta0=theta0,
                              progress=not args.no_progress, log=log)
         else:  # one Ray task per object, joined into the same run directory
-            from sern_jax.grasp import learn_units
+            from sern_jax.grasp.online import learn_units
 
             res = learn_units.run(config, specs, out, theta0=theta0, ray=ray,
                                   progress=not args.no_progress, log=log)
@@ -581,7 +585,7 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
 
 
 def _check_learn_size(config, num_objects: int, out) -> None:
-    from sern_jax.grasp import budget
+    from sern_jax.grasp.online import budget
 
     _check_size(budget.learn(
         objects=num_objects, policies=len(config.policies), seeds=config.num_seeds,
@@ -595,7 +599,7 @@ def _check_learn_size(config, num_objects: int, out) -> None:
 
 def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
     """config.json, metadata.json, results.npz, table.md/json, report.md of a learn run."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     io.save_json(out / "config.json", {"config": res["config"], "objects": res["objects"],
                                        "theta0": theta0.fingerprint,

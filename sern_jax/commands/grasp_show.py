@@ -112,14 +112,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def import_mjx_quietly() -> None:
-    """Imports ``mujoco.mjx`` (through ``sern_jax.grasp._mjx``) dropping its "Failed to import
+    """Imports ``mujoco.mjx`` (through ``sern_jax.grasp.world._mjx``) dropping its "Failed to import
     warp / mujoco_warp" notices (the optional warp backend is not used); other output passes."""
     import contextlib
     import io as _io
 
     buf = _io.StringIO()
     with contextlib.redirect_stderr(buf):
-        from sern_jax.grasp import _mjx  # noqa: F401
+        from sern_jax.grasp.world import _mjx  # noqa: F401
     for line in buf.getvalue().splitlines():
         if not line.startswith(("Failed to import warp", "Failed to import mujoco_warp")):
             print(line, file=sys.stderr)
@@ -145,7 +145,7 @@ def _check_arguments(args) -> None:
 
 def run(args) -> int:
     """Entry point of ``sern grasp show``; returns the exit code."""
-    from sern_jax.grasp import pictures  # imports mujoco without OpenGL
+    from sern_jax.grasp.world import pictures  # imports mujoco without OpenGL
 
     if not args.list:  # pure argument errors first: they need neither MuJoCo nor OpenGL
         _check_arguments(args)
@@ -155,12 +155,12 @@ def run(args) -> int:
         except RuntimeError as exc:
             raise ValueError(f"--gl {args.gl}: {exc} (--no-render)") from None
     import_mjx_quietly()
-    from sern_jax.grasp import objects as objects_lib
+    from sern_jax.grasp.world import objects as objects_lib
 
     if args.list:
         print("\n".join(objects_lib.object_names()))
         return 0
-    from sern_jax.commands import validate
+    from sern_jax.infra import validate
 
     validate.out_dir(args.out)  # tried for real (made and removed), before any work
     if args.mesh is not None:
@@ -173,9 +173,9 @@ def run(args) -> int:
     import jax
     import numpy as np
 
-    from sern_jax import io
-    from sern_jax.grasp import context as context_lib
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.infra import io
+    from sern_jax.grasp.world import context as context_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     safe_name = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name)
     out = args.out or os.path.join("runs", f"show_{safe_name}_s{args.seed}")

@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 
-from sern_jax.commands.validate import OneLineParser
+from sern_jax.infra.validate import OneLineParser
 
 __all__ = ["main", "build_parser", "add_regret_parser", "add_reproduce_parser",
            "add_learn_parser"]
@@ -43,9 +43,9 @@ def add_regret_parser(subparsers) -> None:
     (``experiments/``, ``figures/``); this hands their functions to
     :mod:`sern_jax.commands.regret`."""
     from sern_jax.commands import regret as regret_cmd
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
 
-    regret = script_module("experiments", "regret")
+    from sern_jax.experiment import regret
     make_regret_figs = script_module("figures", "make_regret_figs")
 
     regret_cmd.add_parser(subparsers, defaults=regret.RegretExperiment(),
@@ -56,7 +56,7 @@ def add_regret_parser(subparsers) -> None:
 def add_learn_parser(subparsers) -> None:
     """``sern grasp learn``, with its figure maker from ``figures/``."""
     from sern_jax.commands import grasp_learn
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
 
     make_learn_figs = script_module("figures", "make_learn_figs")
 
@@ -68,9 +68,9 @@ def add_reproduce_parser(subparsers) -> None:
     handed to :mod:`sern_jax.commands.reproduce` from the script folders here."""
     from sern_jax.commands import check as check_cli
     from sern_jax.commands import reproduce
-    from sern_jax.commands._scripts import script_module
+    from sern_jax.commands.scripts import script_module
 
-    regret = script_module("experiments", "regret")
+    from sern_jax.experiment import regret
     make_learn_figs = script_module("figures", "make_learn_figs")
     make_regret_figs = script_module("figures", "make_regret_figs")
 
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):
         return _missing(parser)
-    from sern_jax.distributed import UnitFailedError  # imports no ray
+    from sern_jax.infra.distributed import UnitFailedError  # imports no ray
 
     try:
         return int(args.func(args) or 0)

@@ -1,7 +1,7 @@
 """``sern regret``: regret curves for several policies over many seeds.
 
 This module owns the command's arguments only. The experiment and the figures live in the
-script folders (``experiments/regret.py``, ``figures/make_regret_figs.py``), which library
+script folders (``sern_jax/experiment/regret.py``, ``figures/make_regret_figs.py``), which library
 modules never import: :mod:`sern_jax.commands.main` imports them and hands them to :func:`add_parser`.
 """
 
@@ -22,7 +22,7 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
 
     Args:
       subparsers: from ``ArgumentParser.add_subparsers``.
-      defaults: a default experiment (``experiments.regret.RegretExperiment()``, a frozen
+      defaults: a default experiment (``sern_jax.experiment.regret.RegretExperiment()``, a frozen
         dataclass): its fields are the options' defaults, and the run replaces them.
       run_experiment: ``run_experiment(exp, out_dir, progress=bool) -> run_dir``.
       make_figures: ``make_figures(run_dir) -> [paths]``, or None (no figures).
@@ -121,7 +121,7 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="keep statistics over seeds reduced on the device (means, variances, "
                         "min/max, histogram quantiles: kilobytes per chunk) instead of "
                         "per-seed arrays; for very many seeds (no slope interval, no figures)")
-    from sern_jax import distributed  # --ray [ADDRESS]: seed chunks as Ray tasks (issue 20)
+    from sern_jax.infra import distributed  # --ray [ADDRESS]: seed chunks as Ray tasks (issue 20)
 
     distributed.add_arguments(p)
     p.set_defaults(func=functools.partial(run, defaults=defaults, run_experiment=run_experiment,
@@ -130,14 +130,10 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
 
 
 def _neural():
-    """experiments/neural_regret.py (``--estimator neural``), from the script folder."""
-    try:
-        from sern_jax.commands._scripts import script_module
-    except ImportError:  # a tree without the script-folder helper: the clone's folder
-        import importlib
+    """The neural-learner regret experiment (``--estimator neural``)."""
+    from sern_jax.experiment import neural_regret
 
-        return importlib.import_module("experiments.neural_regret")
-    return script_module("experiments", "neural_regret")
+    return neural_regret
 
 
 def _or(value, default):
@@ -146,7 +142,7 @@ def _or(value, default):
 
 def _run_neural(args, make_figures: Callable | None) -> int:
     """``--estimator neural``: learners of the registry with an MLP on an exact-reward
-    problem (experiments/neural_regret.py); the same run-directory layout."""
+    problem (sern_jax/experiment/neural_regret.py); the same run-directory layout."""
     mod = _neural()
     nd = mod.NeuralRegretExperiment()
     if args.problem == "bernoulli":
@@ -205,7 +201,7 @@ def _run_neural(args, make_figures: Callable | None) -> int:
 def run(args, *, defaults: Any, run_experiment: Callable,
         make_figures: Callable | None = None) -> int:
     """Runs the experiment described by ``args`` (see :func:`add_parser` for the rest)."""
-    from sern_jax import distributed
+    from sern_jax.infra import distributed
 
     ray = distributed.from_args(args)  # None without --ray; bad values: one line, exit 2
     if args.estimator == "neural":

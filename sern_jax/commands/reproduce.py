@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from sern_jax.commands import validate
+from sern_jax.infra import validate
 
 __all__ = ["add_parser", "run", "LEARN_FULL", "LEARN_QUICK"]
 
@@ -63,7 +63,7 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
         "-quick" if args.quick else "")
     out = Path(args.out) if args.out else Path("runs") / name
     learn_cli._check_out(str(out))
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     theta0 = artifacts.load_theta0()  # fails early, with a message, if θ0 is missing
     size = LEARN_QUICK if args.quick else LEARN_FULL
@@ -85,7 +85,7 @@ def run(args, *, check_run, regret_defaults, run_regret, regret_figures, learn_f
 
 def _run_locked(args, out, theta0, size, hard, learn_args, *, check_run, regret_defaults,
                 run_regret, regret_figures, learn_figures) -> int:
-    from sern_jax import io
+    from sern_jax.infra import io
     from sern_jax.commands import grasp_learn as learn_cli
 
     expected = EXPECTED_S["check"] + EXPECTED_S["regret"] + EXPECTED_S[
@@ -153,7 +153,8 @@ def _paired_lines(learn_dir: Path) -> list[str]:
     and are not printed."""
     import numpy as np
 
-    from sern_jax import io, stats
+    from sern_jax.infra import io
+    from sern_jax.analysis import stats
 
     res = io.load_npz(learn_dir / "results.npz")
     policies = io.load_json(learn_dir / "config.json")["config"]["policies"]

@@ -1,9 +1,13 @@
 """The grasp pipeline (imports mujoco, MJX and, in some modules, flax).
 
-Modules are imported on use (``from sern_jax.grasp import context``), not here, so that
-importing the package stays cheap. The path an object takes: ``objects`` (spec) ->
-``context.make_context`` / ``make_contexts`` (``scene`` resting pose, ``depth`` image,
-``candidates``) -> ``sim`` trials (``GraspSimulator``, or ``make_execute`` to vmap).
+Three subpackages, imported on use (``from sern_jax.grasp.world import context``), not here, so
+that importing the package stays cheap:
+
+* ``world``: ``objects`` (spec) -> ``context.make_context`` / ``make_contexts`` (``scene``
+  resting pose, ``depth`` image, ``candidates``) -> ``sim`` trials (``GraspSimulator``, or
+  ``make_execute`` to vmap);
+* ``model``: crops, the quality network, D0, θ0 and the shipped artifacts;
+* ``online``: Algorithm 1 over objects x learners x seeds (``runner``), the ask/tell loop.
 
 Importing this package imports mujoco with OpenGL disabled (``MUJOCO_GL=disable`` for the
 import, the user's value restored after): MuJoCo reads ``MUJOCO_GL`` at import, and a backend
@@ -12,10 +16,7 @@ in commands that render nothing. Rendering loads its backend when it is asked fo
 (``pictures.use_gl``).
 """
 
-import pkgutil as _pkgutil
-
-# the modules that exist (``from sern_jax.grasp import *`` imports them all)
-__all__ = sorted(m.name for m in _pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+__all__ = ["model", "online", "world"]
 
 
 def _import_mujoco_without_gl() -> None:

@@ -11,7 +11,7 @@ Learners take their network as an argument (:class:`Model`: ``Network(init, appl
 logits the loss is on and the features Neural-Linear uses) and assume nothing about what a
 candidate is: in grasping ``Obs.inputs`` is the 64 candidates' (crop image [K, S, S], grasp
 depth [K]); on a synthetic problem it is a [K, d] context. Distributions over candidates come
-from :mod:`sern_jax.policies` with the validity mask; the draw is ``policies.sample_icdf``
+from :mod:`sern_jax.core.policies` with the validity mask; the draw is ``policies.sample_icdf``
 with the uniform ``Obs.u``, which the runners share between learners (common random
 numbers: paired comparisons). Randomness a learner needs beyond that (a Thompson draw, an
 ensemble member) comes from the ``key`` of ``act``; ``key`` is consumed.
@@ -37,8 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from sern_jax import policies as pol
-from sern_jax.types import Array, Key, Params
+from sern_jax.core import policies as pol
+from sern_jax.core.types import Array, Key, Params
 
 __all__ = [
     "FLOAT32_TINY",
@@ -380,7 +380,7 @@ def make_neural_update(model: Model, train: TrainConfig):
 
 def policy_act(model: Model, probs_fn: Callable[[Array, Array, LearnerState, Obs], Array]):
     """``act`` of a learner whose distribution is a function of the network's r̂:
-    ``probs = probs_fn(r_hat [K], valid [K], state, obs)`` (a :mod:`sern_jax.policies`
+    ``probs = probs_fn(r_hat [K], valid [K], state, obs)`` (a :mod:`sern_jax.core.policies`
     function with the mask), drawn by ``sample_icdf(obs.u, probs, mask)``. ``key`` unused."""
 
     def act(key: Key, state: LearnerState, obs: Obs):

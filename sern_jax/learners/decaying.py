@@ -21,9 +21,9 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
-from sern_jax.types import Array
+from sern_jax.core.types import Array
 
 __all__ = [
     "DecayExtra",

@@ -54,9 +54,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
-from sern_jax.types import Array, Key
+from sern_jax.core.types import Array, Key
 
 __all__ = ["BOOTSTRAPS", "HEADS", "EnsembleConfig", "EnsembleExtra", "Heads",
            "SharedHeadsExtra", "bootstrap_weights", "ensemble_ts"]

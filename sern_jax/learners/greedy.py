@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
 
 __all__ = ["GreedyConfig", "greedy"]

@@ -29,7 +29,7 @@ is fine-tuned by the same optax update as every learner (``base.make_neural_upda
 
 * ``neural_lints`` (the Showdown's NeuralLinear): σ² ~ IG(a, b), β ~ N(μ, σ² Λ⁻¹), play
   the valid candidate of highest φ·β. π is not closed form: ``probs`` is the one-hot of the
-  played candidate (:mod:`sern_jax.policies`' convention for index policies).
+  played candidate (:mod:`sern_jax.core.policies`' convention for index policies).
 * ``neural_linucb``: play the valid candidate of highest ``φ·μ + c sqrt(b/a · φᵀ Λ⁻¹ φ)``,
   the posterior mean plus ``c`` scale units of its Student-t marginal (2a dof); ``c`` is
   ``--ucb-width`` (LinUCB's α, Li et al. 2010, which they tune; default 1).
@@ -37,7 +37,7 @@ is fine-tuned by the same optax update as every learner (``base.make_neural_upda
 Greedy evaluation (``predict``) uses the posterior mean, the regression that acts.
 
 Per-arm posteriors. A network with one linear head per arm (the synthetic problems' MLP,
-:mod:`sern_jax.networks`) returns :class:`ArmFeatures` from ``model.features``: the trunk's
+:mod:`sern_jax.engine.networks`) returns :class:`ArmFeatures` from ``model.features``: the trunk's
 features and the candidate's arm. The learner then keeps one posterior per arm
 (:func:`fit_arm_posteriors`: each arm's Normal-inverse-Gamma regression on its own rows, with
 its own (a, b), as the Showdown's NeuralLinear does) of dimension d + 1, instead of one over
@@ -80,9 +80,9 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
-from sern_jax.types import Array, Key
+from sern_jax.core.types import Array, Key
 
 __all__ = [
     "PRIOR_MEANS",

@@ -31,9 +31,9 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
-from sern_jax.types import Array, Key
+from sern_jax.core.types import Array, Key
 
 __all__ = ["NeuralUCBConfig", "NeuralUCBExtra", "candidate_gradients", "candidate_widths",
            "neural_ucb"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base
 
 __all__ = ["NormalizedConfig", "normalized"]

@@ -12,8 +12,8 @@ import dataclasses
 
 import numpy as np
 
-from sern_jax import policies as pol
-from sern_jax import schedules
+from sern_jax.core import policies as pol
+from sern_jax.core import schedules
 from sern_jax.learners import base
 
 __all__ = ["SernConfig", "SernLogConfig", "sern", "sern_log"]

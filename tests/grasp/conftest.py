@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import objects, scene, sim
+from sern_jax.grasp.world import objects, scene, sim
 
 MJX_BATCH = 8
 
@@ -56,7 +56,7 @@ CORE_K = 6
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """A finished 2-object x 2-pose D0 (one shard per object): (config, directory)."""
-    from sern_jax.grasp import dataset
+    from sern_jax.grasp.model import dataset
 
     config = dataset.DatasetConfig(**TINY_DATASET)
     out = tmp_path_factory.mktemp("d0")
@@ -73,8 +73,8 @@ def tiny_theta0():
 def make_tiny_theta0():
     """The ``tiny_theta0`` fixture's θ0 (also what tests/grasp/data/make_learn_reference.py
     runs, so the reference and the test start from one θ0)."""
-    from sern_jax.grasp import artifacts
-    from sern_jax.grasp import quality_net as qn
+    from sern_jax.grasp.model import artifacts
+    from sern_jax.grasp.model import quality_net as qn
 
     network = qn.make_quality_network()
     params = network.init(jax.random.key(0))

@@ -5,8 +5,10 @@ import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import artifacts, asktell, context, objects, runner, sim
-from sern_jax.grasp import quality_net as qn
+from sern_jax.grasp.model import artifacts
+from sern_jax.grasp.online import asktell, runner
+from sern_jax.grasp.world import context, objects, sim
+from sern_jax.grasp.model import quality_net as qn
 from sern_jax.learners import registry
 
 

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.candidates: antipodal grasps on a box, fixed K, bad input."""
+"""Tests for sern_jax.grasp.world.candidates: antipodal grasps on a box, fixed K, bad input."""
 
 import math
 
@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from sern_jax.grasp import candidates as cd
-from sern_jax.grasp import depth as dp
+from sern_jax.grasp.world import candidates as cd
+from sern_jax.grasp.world import depth as dp
 
 _HALF = (0.03, 0.02, 0.015)  # box half-sizes: 6 x 4 x 3 cm
 _POS = (0.012, -0.008, _HALF[2])

@@ -1,10 +1,10 @@
-"""Tests for sern_jax.grasp.context: batched equals unbatched, streams, no recompile, trials."""
+"""Tests for sern_jax.grasp.world.context: batched equals unbatched, streams, no recompile, trials."""
 
 import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import context, objects, scene, sim
+from sern_jax.grasp.world import context, objects, scene, sim
 
 NUM_POSES = 3
 

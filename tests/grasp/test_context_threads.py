@@ -1,10 +1,10 @@
-"""Resting poses settle in threads (sern_jax.grasp.context): the same contexts bit for bit."""
+"""Resting poses settle in threads (sern_jax.grasp.world.context): the same contexts bit for bit."""
 
 import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import context, objects
+from sern_jax.grasp.world import context, objects
 
 
 def _arrays(ctx) -> dict[str, np.ndarray]:
@@ -43,7 +43,7 @@ def test_context_threads_follow_the_task_share(monkeypatch):
 
 def _step_by_step_pose(model, seed, max_steps=600):
     """The resting pose as the one-mj_step-per-iteration loop computes it."""
-    from sern_jax.grasp import scene
+    from sern_jax.grasp.world import scene
 
     with_loop = scene._settle_in_blocks
     try:
@@ -54,7 +54,7 @@ def _step_by_step_pose(model, seed, max_steps=600):
 
 
 def test_rollout_settling_equals_the_step_loop_bit_for_bit(monkeypatch):
-    from sern_jax.grasp import scene
+    from sern_jax.grasp.world import scene
 
     specs = [objects.make_object("tless_part_a"), objects.make_object("pipe_tee_steel"),
              objects.sample_population(3, 2)[1]]
@@ -86,7 +86,7 @@ def test_settling_redoes_a_block_that_rollout_stopped_early(monkeypatch):
     refused, and the pose comes from the step loop."""
     from mujoco import rollout as mj_rollout
 
-    from sern_jax.grasp import scene
+    from sern_jax.grasp.world import scene
 
     model = context.scene_model(objects.make_object("tless_part_a"))
     want = _step_by_step_pose(model, 9)
@@ -119,7 +119,7 @@ def test_pooled_native_trials_equal_one_thread_bit_for_bit():
     count, objects from several threads at once) give the outcomes of one thread."""
     import concurrent.futures
 
-    from sern_jax.grasp import sim
+    from sern_jax.grasp.world import sim
 
     specs = [objects.make_object("tless_part_a"), objects.make_object("pipe_tee_steel")]
     cases = []
@@ -148,7 +148,7 @@ def test_pooled_native_trials_equal_one_thread_bit_for_bit():
 
 
 def test_camera_model_is_kept_per_scene_contents():
-    from sern_jax.grasp import depth
+    from sern_jax.grasp.world import depth
 
     model = context.scene_model(objects.make_object("tless_part_a"))
     first = context._camera_model(model)
@@ -164,7 +164,8 @@ def test_camera_model_is_kept_per_scene_contents():
 def test_seed_noise_in_one_call_equals_sample_noise_per_seed():
     """The runner draws every seed's trial noise in one jitted call: the values of one
     eager ``sim.sample_noise`` per seed key, bit for bit."""
-    from sern_jax.grasp import runner, sim
+    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.world import sim
 
     class _Sim:
         config = sim.TrialConfig()
@@ -246,7 +247,7 @@ def test_readme_quotes_the_parallel_strong_run():
 def test_stream_keys_in_one_call_equal_each_copys_stream():
     """The runner derives a stream's [O, S] keys in one jitted call: the keys of one eager
     ``_stream`` per (object, seed), for lists of keys and for a key array."""
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     root = jax.random.key(3)
     keys_os = [[runner.object_key(root, name, s) for s in range(3)] for name in ("a", "bb")]

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.crops: geometry, scipy parity on real images, batching, bad input."""
+"""Tests for sern_jax.grasp.world.crops: geometry, scipy parity on real images, batching, bad input."""
 
 import math
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from sern_jax.grasp import candidates as cd
-from sern_jax.grasp import crops
-from sern_jax.grasp import depth as dp
+from sern_jax.grasp.world import candidates as cd
+from sern_jax.grasp.world import crops
+from sern_jax.grasp.world import depth as dp
 
 _CAMERA = dp.CameraConfig()  # 96 x 96 at GQ-CNN's 1/3 scale
 _CONFIG = crops.CropConfig()
@@ -24,7 +24,7 @@ _ATOL = 1e-5
 @pytest.fixture(scope="module")
 def real_images():
     """Two rendered scenes (small box, T shape) with their 64 sampled candidates each."""
-    from sern_jax.grasp import objects, scene
+    from sern_jax.grasp.world import objects, scene
 
     params = dp.overhead_params(_CAMERA)
     render = jax.jit(lambda m, d, p: dp.render(_CAMERA, m, d, p))

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.dataset: D0 generation is deterministic, resumes to the same
+"""Tests for sern_jax.grasp.model.dataset: D0 generation is deterministic, resumes to the same
 shards, refuses a different config in the same directory, and labels only valid slots."""
 
 import dataclasses
@@ -8,8 +8,8 @@ import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import dataset
-from sern_jax.grasp import objects
+from sern_jax.grasp.model import dataset
+from sern_jax.grasp.world import objects
 
 TINY = dict(seed=0, num_objects=2, poses_per_object=2, objects_per_shard=1)
 
@@ -132,7 +132,7 @@ def test_damaged_shard_is_refused_by_load_and_recomputed_by_generate(tiny_datase
                                                                       how):
     """A damaged shard is never counted as done: load names it in one line, a rerun of
     generate sets it aside and recomputes the same arrays (issue 16)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     config, first = tiny_dataset
     d0 = tmp_path / "d0"
@@ -154,7 +154,7 @@ def test_damaged_shard_is_refused_by_load_and_recomputed_by_generate(tiny_datase
 
 def test_shard_with_wrong_rows_is_refused(tiny_dataset, tmp_path):
     """A well-formed shard holding another shard's contexts (e.g. copied over it)."""
-    from sern_jax import io
+    from sern_jax.infra import io
 
     config, first = tiny_dataset
     d0 = tmp_path / "d0"
@@ -166,7 +166,7 @@ def test_shard_with_wrong_rows_is_refused(tiny_dataset, tmp_path):
 
 
 def test_dataset_run_directory_is_locked(tiny_dataset, tmp_path):
-    from sern_jax import io
+    from sern_jax.infra import io
 
     config, first = tiny_dataset
     d0 = tmp_path / "d0"

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.depth: parity with native mj_ray, cylinders, no materials."""
+"""Tests for sern_jax.grasp.world.depth: parity with native mj_ray, cylinders, no materials."""
 
 import dataclasses
 
@@ -7,9 +7,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
-from sern_jax.grasp._mjx import mjx
+from sern_jax.grasp.world._mjx import mjx
 
-from sern_jax.grasp import depth as dp
+from sern_jax.grasp.world import depth as dp
 
 # A scene without any <material>, with every geom type the camera must see, a cylinder,
 # a mesh, and a "gripper" body in geom group 3 hovering over the objects.

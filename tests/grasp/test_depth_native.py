@@ -3,7 +3,7 @@
 import jax
 import numpy as np
 
-from sern_jax.grasp import context, depth, depth_native, objects, scene
+from sern_jax.grasp.world import context, depth, depth_native, objects, scene
 
 
 def test_native_renderer_matches_jax_renderer():

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax.grasp import context, depth, objects
+from sern_jax.grasp.world import context, depth, objects
 
 RS = depth.CameraConfig(noise_model="realsense")
 

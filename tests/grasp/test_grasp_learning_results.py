@@ -9,7 +9,7 @@ from scipy import stats as sps
 
 from experiments import grasp_learning as gl
 from experiments import grasp_sensitivity as gs
-from sern_jax import stats
+from sern_jax.analysis import stats
 
 
 def _doc(label, objects, all_objects, policies, lv, pe=None, rounds_done=None, **extra):

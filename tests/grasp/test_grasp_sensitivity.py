@@ -10,8 +10,9 @@ from scipy import stats as sps
 
 from experiments import grasp_learning as gl
 from experiments import grasp_sensitivity as gs
-from sern_jax import distributed, io, stats
-from sern_jax.grasp import context, sim
+from sern_jax.infra import distributed, io
+from sern_jax.analysis import stats
+from sern_jax.grasp.world import context, sim
 
 
 def test_world_of_each_cell():

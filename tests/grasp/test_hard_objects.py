@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from experiments import hard_objects as screen
-from sern_jax.grasp import objects, scene
+from sern_jax.grasp.world import objects, scene
 
 HARD = objects.hard_object_names()
 
@@ -79,7 +79,7 @@ def test_summary_uses_the_fresh_best_for_the_screen():
 
 
 def test_shipped_hard_set_is_what_the_shipped_screen_gives():
-    from sern_jax.grasp import artifacts, pretrain
+    from sern_jax.grasp.model import artifacts, pretrain
 
     theta0 = artifacts.load_theta0()
     hs = artifacts.hard_set(theta0)

@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from sern_jax import io
+from sern_jax.infra import io
 from sern_jax.commands import grasp_learn as learn_cli
 from sern_jax.commands import reproduce
-from sern_jax.grasp import artifacts, online
+from sern_jax.grasp.model import artifacts
+from sern_jax.grasp.online import runner as online
 
 
 def _paper_eval():
@@ -152,7 +153,7 @@ def test_reproduce_summary_leads_with_paired_t_intervals_and_holm(tmp_path):
     import numpy as np
     from scipy import stats as sps
 
-    from sern_jax import io
+    from sern_jax.infra import io
 
     rng = np.random.default_rng(0)
     r1, o, q, s = 3, 2, 3, 6  # rounds 0..2, 2 objects, 3 policies, 6 seeds
@@ -203,7 +204,7 @@ def test_learn_run_dir_check_is_ios(tmp_path, monkeypatch, capsys):
     run, or a learn run whose checkpoint was removed) is refused in one line, exit 2, left
     byte-identical and the runner never starts; the same settings resume (the runner is
     reached); other settings are refused whichever file holds the fingerprint."""
-    from sern_jax.grasp import runner
+    from sern_jax.grasp.online import runner
 
     reached = []
 

@@ -1,11 +1,11 @@
-"""sern_jax.grasp.learn_units' split and join (the Ray learning run's checkpoints, issue 20),
+"""sern_jax.grasp.online.learn_units' split and join (the Ray learning run's checkpoints, issue 20),
 on synthetic arrays: no learning run, no Ray (the runs themselves are tests/test_distributed.py's
 slow tests)."""
 
 import numpy as np
 
-from sern_jax import io
-from sern_jax.grasp import learn_units, runner
+from sern_jax.infra import io
+from sern_jax.grasp.online import learn_units, runner
 
 R, O, Q, S, E = 3, 2, 2, 3, 4  # rounds 0..2, objects, learners, seeds, grasps per phase
 

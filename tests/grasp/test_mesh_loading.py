@@ -7,7 +7,7 @@ import pytest
 
 from sern_jax.commands import grasp_learn as learn_cli
 from sern_jax.commands import main as cli
-from sern_jax.grasp import objects
+from sern_jax.grasp.world import objects
 
 _PYTHON_ARGS = ("units=", "require_watertight", "max_vertices=")
 

@@ -1,10 +1,10 @@
-"""Tests for sern_jax.grasp.objects: named, hard and sampled objects; mesh import."""
+"""Tests for sern_jax.grasp.world.objects: named, hard and sampled objects; mesh import."""
 
 import numpy as np
 import pytest
 import trimesh
 
-from sern_jax.grasp import objects
+from sern_jax.grasp.world import objects
 
 
 @pytest.mark.parametrize("name", objects.object_names())

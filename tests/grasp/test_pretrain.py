@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.pretrain and artifacts: metrics against hand-computed values, a
+"""Tests for sern_jax.grasp.model.pretrain and artifacts: metrics against hand-computed values, a
 tiny pretraining run end to end (artefacts written and loaded back), resume after a
 checkpoint, the hard-set screen's rule, and θ0 loading / hard_set / install."""
 
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from sern_jax import io
-from sern_jax.grasp import artifacts, dataset, objects, pretrain
+from sern_jax.infra import io
+from sern_jax.grasp.model import artifacts, dataset, pretrain
+from sern_jax.grasp.world import objects
 
 CONFIG = pretrain.PretrainConfig(epochs=2, batch_size=32, heldout_objects=1,
                                  heldout_poses=1, heldout_trials=2, core_k=4)
@@ -291,7 +292,7 @@ def test_install_copies_and_reloads(pretrained, tmp_path):
 @pytest.mark.parametrize("how", ["truncate", "empty", "random"])
 @pytest.mark.parametrize("name", ["core_set.npz", "theta0.msgpack"])
 def test_damaged_theta0_files_are_one_line(pretrained, tmp_path, name, how):
-    from sern_jax.grasp import artifacts
+    from sern_jax.grasp.model import artifacts
 
     _, out, _, _ = pretrained
     copy = tmp_path / "theta0"

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.quality_net: shapes and cost, outputs, losses, fit, batching."""
+"""Tests for sern_jax.grasp.model.quality_net: shapes and cost, outputs, losses, fit, batching."""
 
 import functools
 
@@ -8,7 +8,7 @@ import numpy as np
 import optax
 import pytest
 
-from sern_jax.grasp import quality_net as qn
+from sern_jax.grasp.model import quality_net as qn
 
 _CONFIG = qn.QualityNetConfig()
 _S = _CONFIG.crop_size

@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.runner (Algorithm 1 for grasping, batched): a tiny end-to-end
+"""Tests for sern_jax.grasp.online.runner (Algorithm 1 for grasping, batched): a tiny end-to-end
 run equal bit for bit to the pre-refactor online.run, resume after an interrupt, common
 random numbers, SERN's choice law, learning from failures, a toy learner through the
 runner, a learner returning no grasp stopped, and bad input refused before anything
@@ -17,10 +17,12 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from sern_jax import io
-from sern_jax import policies as pol
+from sern_jax.infra import io
+from sern_jax.core import policies as pol
 from sern_jax.commands import main as cli
-from sern_jax.grasp import artifacts, context, objects, runner
+from sern_jax.grasp.model import artifacts
+from sern_jax.grasp.world import context, objects
+from sern_jax.grasp.online import runner
 from sern_jax.learners import base as lbase
 
 # 1 object x 4 learners x 2 seeds x 2 rounds of 3 exploration + 2 evaluation grasps.
@@ -312,7 +314,7 @@ class _HashSimulator:
     the test sees any mix-up of rows, noise draws or poses."""
 
     def __init__(self):
-        from sern_jax.grasp import sim as sim_lib
+        from sern_jax.grasp.world import sim as sim_lib
 
         self.config, self.sim_lib, self.rows = sim_lib.TrialConfig(), sim_lib, 0
 
@@ -328,7 +330,7 @@ class _HashSimulator:
 def test_shared_trials_equal_simulating_every_copy(spec):
     """_run_trials simulates each distinct (seed, trial, grasp) once: the outcomes equal
     those of simulating every policy's copy with its (shared) noise."""
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     rng = np.random.default_rng(0)
     num_s, num_q, num_n = 2, 3, 4
@@ -359,7 +361,7 @@ def test_shared_trials_equal_simulating_every_copy(spec):
 def test_native_trial_does_not_depend_on_its_batch(spec):
     """What makes sharing trials exact: a native trial's outcome is the same whatever else
     runs in its batch and in whatever order (MuJoCo is deterministic)."""
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     ctx = context.make_contexts(jax.random.key(11), spec, 2)
     simulator = sim_lib.GraspSimulator(ctx.model, chunk=16)
@@ -380,7 +382,7 @@ def test_native_trial_does_not_depend_on_its_batch(spec):
 def test_oracle_matches_success_probability(spec):
     """_oracle's first context uses the noise of success_probability(key, ., M): the two
     estimates agree exactly; invalid candidates get 0."""
-    from sern_jax.grasp import sim as sim_lib
+    from sern_jax.grasp.world import sim as sim_lib
 
     ctx = context.make_contexts(jax.random.key(21), spec, 2)
     simulator = sim_lib.GraspSimulator(ctx.model)
@@ -403,7 +405,7 @@ def test_regret_accounting(tiny_theta0, spec, tmp_path, monkeypatch):
     values every candidate on an independent set (issue 17): greedy's pseudo-regret is
     value[argmax select] - value[chosen], summed over the round; NaN at round 0; the table
     carries Student-t intervals over the seeds."""
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     calls = []
     real = runner._oracle
@@ -468,7 +470,7 @@ def test_learner_told_only_failures_lowers_its_scores(tiny_theta0, spec, tmp_pat
 def test_sern_choices_follow_softmax_over_valid(tiny_theta0, spec):
     """The sern learner's draws, over many uniforms on one context, match softmax(r̂/α)
     restricted to the valid slots; invalid slots are never chosen."""
-    from sern_jax.grasp import crops as crops_lib
+    from sern_jax.grasp.world import crops as crops_lib
 
     ctx = context.make_contexts(jax.random.key(5), spec, 1)
     valid = np.asarray(ctx.candidates.valid).copy()
@@ -808,7 +810,7 @@ def test_check_actions_cases(spec):
 def test_budget_counts_both_oracle_sets_and_the_subsample():
     """The oracle's trials in the size check: selection and valuation sets (2 x M per
     candidate) on the first G grasps of each phase; the checkpoint is results only."""
-    from sern_jax.grasp import budget
+    from sern_jax.grasp.online import budget
 
     kw = dict(objects=6, policies=11, seeds=20, rounds=5, explore=20, evaluate=5,
               eval_poses=4, eval_trials=8)

@@ -1,10 +1,10 @@
-"""Tests for sern_jax.grasp.scene: build, resting pose, solver settings, indices."""
+"""Tests for sern_jax.grasp.world.scene: build, resting pose, solver settings, indices."""
 
 import mujoco
 import numpy as np
 import pytest
 
-from sern_jax.grasp import objects, scene
+from sern_jax.grasp.world import objects, scene
 
 
 def _lowest_z(model):
@@ -55,7 +55,7 @@ def test_resting_pose_is_seeded():
 
 
 def test_mjx_accepts_the_scene():
-    from sern_jax.grasp._mjx import mjx
+    from sern_jax.grasp.world._mjx import mjx
 
     model = scene.build_scene(objects.make_object("triangular_prism"))
     mx = mjx.put_model(model)

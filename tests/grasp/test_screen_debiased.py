@@ -5,7 +5,8 @@ maximum of its 64 eight-trial frequencies averages about 0.8."""
 import numpy as np
 import pytest
 
-from sern_jax.grasp import objects, pretrain
+from sern_jax.grasp.world import objects
+from sern_jax.grasp.model import pretrain
 
 
 def _synthetic_rows(num_objects, p=0.4, poses=8, k=64, trials=8, seed=0):
@@ -109,7 +110,7 @@ def test_lcb_rule_lets_a_truly_good_candidate_qualify_with_enough_trials():
 
 
 def test_lcb_is_the_bonferroni_clopper_pearson_bound():
-    from sern_jax import stats
+    from sern_jax.analysis import stats
 
     successes = np.array([[8, 5, 0], [3, 7, 1]])
     valid = np.array([[True, True, True], [True, False, True]])

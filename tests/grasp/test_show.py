@@ -51,7 +51,7 @@ def test_flag_errors_come_before_the_gl_check(tmp_path, monkeypatch):
     """On a machine without a GL library (the H100 machine without EGL), a bad flag is still
     named first: the argument checks run before the backend is loaded. Control: with good
     flags the GL failure itself is what the user hears."""
-    from sern_jax.grasp import pictures
+    from sern_jax.grasp.world import pictures
 
     def no_gl(backend):
         raise RuntimeError("no GL here")

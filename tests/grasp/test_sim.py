@@ -1,4 +1,4 @@
-"""Tests for sern_jax.grasp.sim: outcomes, NaN handling, batching, input checks, parity."""
+"""Tests for sern_jax.grasp.world.sim: outcomes, NaN handling, batching, input checks, parity."""
 
 import copy
 
@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from sern_jax.grasp import sim
+from sern_jax.grasp.world import sim
 
 MJX_BATCH = 8  # must match tests/grasp/conftest.py
 
@@ -110,7 +110,7 @@ def test_mjx_flags_nan(box_model, mjx_sim, paired_trials):
 @pytest.mark.slow
 def test_backends_agree_over_objects():
     """Paired native/MJX outcomes agree on >= 90% of trials (one MJX compile/object)."""
-    from sern_jax.grasp import benchmarks as bench
+    from sern_jax.bench import grasp as bench
 
     result = bench.measure_agreement(["small_box", "sphere", "capsule", "l_shape"], 32)
     assert result["agreement"] >= 0.9, result

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from experiments import paper_table1
-from sern_jax.grasp import online
+from sern_jax.grasp.online import runner as online
 
 
 def test_table_rows_carry_sd_and_se_beside_std():

@@ -7,8 +7,10 @@ import json
 
 import pytest
 
-from sern_jax import io
-from sern_jax.grasp import dataset, pretrain, runner, scene, sim
+from sern_jax.infra import io
+from sern_jax.grasp.model import dataset, pretrain
+from sern_jax.grasp.online import runner
+from sern_jax.grasp.world import scene, sim
 
 
 def _weak():
@@ -55,7 +57,7 @@ def test_load_refuses_a_d0_of_another_trial(tmp_path, monkeypatch):
 
 
 def test_learn_fingerprint_sees_the_default_trial(monkeypatch, tiny_theta0):
-    from sern_jax.grasp import objects
+    from sern_jax.grasp.world import objects
 
     config = runner.OnlineConfig(rounds=1, explore=1, num_seeds=1)
     specs = [objects.make_object("small_box")]

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sern_jax.grasp import scene, sim
+from sern_jax.grasp.world import scene, sim
 
 
 def test_refine_keeps_physical_time():
@@ -26,7 +26,7 @@ def test_refine_keeps_physical_time():
 
 def test_refined_trial_lifts_the_centred_box(box_model, centred_grasp):
     # the centred grasp of the small box succeeds at 5 ms and at 2.5 ms (same start pose)
-    from sern_jax.grasp import context, objects
+    from sern_jax.grasp.world import context, objects
 
     spec = objects.make_object("small_box")
     pose = scene.object_pose(box_model)

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sern_jax import stats
-from sern_jax.grasp import artifacts, objects, pretrain
+from sern_jax.analysis import stats
+from sern_jax.grasp.model import artifacts, pretrain
+from sern_jax.grasp.world import objects
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "experiments" / "results"

@@ -5,7 +5,8 @@ identity (issue 17: sensitivity and sim-to-sim transfer)."""
 import numpy as np
 import pytest
 
-from sern_jax.grasp import context, objects, online, scene, sim
+from sern_jax.grasp.world import context, objects, scene, sim
+from sern_jax.grasp.online import runner as online
 
 CONFIG = online.OnlineConfig(policies=("greedy",), num_seeds=2, rounds=1, explore=3,
                              evaluate=2, eval_poses=0, fit_steps=1, batch_size=4)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import (
     base,
     decaying,

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax import policies as pol
+from sern_jax.core import policies as pol
 from sern_jax.learners import base, registry
 
 K, D, E, T = 16, 5, 4, 12

@@ -1,7 +1,7 @@
 """Fast Thompson runner, today's code against an earlier commit's, paired on one core (issue 20).
 
 Pins the process to CPU 0 (os.sched_setaffinity, before JAX starts), loads the earlier
-commit's sern_jax/prng.py and sern_jax/fast_thompson.py from git as separate modules, and
+commit's sern_jax/core/prng.py and sern_jax/engine/fast_thompson.py from git as separate modules, and
 times fast_thompson.make_batched for 256 seeds (one chunk), K = 64, T = 2,000 (the bench
 workload), alternating the two versions; prints wall and CPU seconds per run, loop steps per
 round, seed-rounds/s and the mean regret at T. CPU time is the load-robust figure on the
@@ -19,8 +19,9 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 jax.config.update("jax_threefry_partitionable", True)
-from sern_jax import benchmarks, fast_thompson  # noqa: E402
-from sern_jax import simulate as sim  # noqa: E402
+from sern_jax.bench import bandit as benchmarks
+from sern_jax.engine import fast_thompson  # noqa: E402
+from sern_jax.engine import simulate as sim  # noqa: E402
 
 old = sys.argv[1] if len(sys.argv) > 1 else "16e89b0"
 repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 3

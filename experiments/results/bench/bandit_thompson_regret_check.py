@@ -18,8 +18,9 @@ import jax
 import numpy as np
 
 jax.config.update("jax_threefry_partitionable", True)
-from sern_jax import benchmarks, fast_thompson  # noqa: E402
-from sern_jax import simulate as sim  # noqa: E402
+from sern_jax.bench import bandit as benchmarks
+from sern_jax.engine import fast_thompson  # noqa: E402
+from sern_jax.engine import simulate as sim  # noqa: E402
 
 old = sys.argv[1] if len(sys.argv) > 1 else "16e89b0"
 root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(

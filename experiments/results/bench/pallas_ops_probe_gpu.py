@@ -2,7 +2,7 @@
 
 ``python experiments/results/bench/pallas_ops_probe_gpu.py OUT.json``: for the operations the
 SERN round uses (exp of (r̂ − 1)/α, the add-half division, the tiled prefix sums, a + b·c),
-computes each in a Triton kernel (jax.experimental.pallas, as sern_jax.pallas_softmax does)
+computes each in a Triton kernel (jax.experimental.pallas, as sern_jax.engine.pallas_softmax does)
 and in XLA on the same inputs, and records the fraction of bitwise-equal results; for exp also
 candidates: libdevice ``__nv_expf`` (jnp.exp), ``ex2.approx.ftz(x·log2 e)`` and NumPy's.
 """
@@ -18,7 +18,7 @@ import numpy as np
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pltriton
 
-from sern_jax import pallas_softmax
+from sern_jax.engine import pallas_softmax
 
 ROWS, K = 1 << 16, 64
 

@@ -1,4 +1,4 @@
-"""GPU probe of the fused Pallas kernel (sern_jax.pallas_softmax) against the fast engine.
+"""GPU probe of the fused Pallas kernel (sern_jax.engine.pallas_softmax) against the fast engine.
 
 Run on the device machine (H100): ``python experiments/results/bench/pallas_probe_gpu.py OUT.json
 [configs]``. In one process:
@@ -24,8 +24,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import fast_softmax, io, pallas_softmax, problems, timing
-from sern_jax import simulate as sim
+from sern_jax.engine import fast_softmax, pallas_softmax
+from sern_jax.infra import io, timing
+from sern_jax.core import problems
+from sern_jax.engine import simulate as sim
 
 
 def log(*a):

@@ -13,8 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sern_jax import benchmarks, executor, fast_softmax, io
-from sern_jax import simulate as sim
+from sern_jax.bench import bandit as benchmarks
+from sern_jax.engine import drive as executor, fast_softmax
+from sern_jax.infra import io
+from sern_jax.engine import simulate as sim
 
 
 def timeit(fn, repeats=3):

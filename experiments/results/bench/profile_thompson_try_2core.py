@@ -4,7 +4,7 @@ LCG alone, the unrolled threefry alone, threefry + open_unit + prng.hold, the BB
 math on LCG uniforms, and the full prng.beta_try. Run: python
 experiments/results/bench/profile_thompson_try_2core.py (prints one line per variant)."""
 import time, jax, jax.numpy as jnp, numpy as np
-from sern_jax import prng
+from sern_jax.core import prng
 C, K, N = 256, 64, 400
 lane = jnp.arange(K, dtype=jnp.uint32)[None, :]
 k1 = jnp.arange(C, dtype=jnp.uint32)[:, None] * np.uint32(2654435761)

@@ -19,7 +19,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[3]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "grasp")]
 
-from sern_jax.grasp import artifacts, objects, runner
+from sern_jax.grasp.model import artifacts
+from sern_jax.grasp.world import objects
+from sern_jax.grasp.online import runner
 
 
 def main() -> None:

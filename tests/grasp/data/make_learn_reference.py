@@ -25,7 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
-from sern_jax.grasp import objects, runner  # noqa: E402
+from sern_jax.grasp.world import objects
+from sern_jax.grasp.online import runner  # noqa: E402
 from tests.grasp.conftest import make_tiny_theta0  # noqa: E402
 from tests.grasp.test_runner import CONFIG, OBJECT, params_digests, params_projections  # noqa: E402
 

@@ -23,7 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
-from sern_jax.grasp import artifacts, objects, runner  # noqa: E402
+from sern_jax.grasp.model import artifacts
+from sern_jax.grasp.world import objects
+from sern_jax.grasp.online import runner  # noqa: E402
 
 
 def main() -> None:

@@ -2,15 +2,16 @@
 16-core host. Not a result file; prints timings."""
 import concurrent.futures as cf, os, sys, time, threading
 import numpy as np, jax
-# the trials before (sern_jax/grasp/sim.py at 2eed060), read from git rather than kept as a copy
+# the trials before (sern_jax/grasp/world/sim.py at 2eed060), read from git rather than kept as a copy
 import importlib.util, subprocess, tempfile
-_src = subprocess.run(["git", "show", "2eed060:sern_jax/grasp/sim.py"], check=True,
+_src = subprocess.run(["git", "show", "2eed060:sern_jax/grasp/world/sim.py"], check=True,
                       capture_output=True, text=True).stdout
 _path = os.path.join(tempfile.mkdtemp(), "sim_old.py")
 open(_path, "w").write(_src)
 _spec = importlib.util.spec_from_file_location("sim_old", _path)
 sim_old = importlib.util.module_from_spec(_spec); _spec.loader.exec_module(sim_old)
-from sern_jax.grasp import context as ctx, sim, objects as ol, scene, runner
+from sern_jax.grasp.world import context as ctx, sim, objects as ol, scene
+from sern_jax.grasp.online import runner
 T = time.perf_counter
 print("cores", os.cpu_count(), "backend", jax.default_backend(), flush=True)
 names = ol.HARD_SET

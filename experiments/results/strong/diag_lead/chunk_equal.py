@@ -10,8 +10,8 @@ import time
 import jax
 import numpy as np
 
-from sern_jax.grasp import context, objects
-from sern_jax.grasp import depth as depth_lib
+from sern_jax.grasp.world import context, objects
+from sern_jax.grasp.world import depth as depth_lib
 
 NAMES = ["triangular_prism", "tless_part_a", "detergent_bottle", "pipe_tee_steel",
          "tless_part_a_steel", "tless_part_b_steel"]

@@ -13,7 +13,7 @@ import jax
 import jax.monitoring
 import numpy as np
 
-from sern_jax.grasp import context, objects
+from sern_jax.grasp.world import context, objects
 
 T0 = time.perf_counter()
 EVENTS = []
@@ -37,7 +37,7 @@ def inputs(name, p):
     keys = context._keys(jax.random.key(0), p)
     seeds, kn, kc = context._streams(keys)
     poses = context._resting_poses(model, np.asarray(seeds), config)
-    from sern_jax.grasp import depth as depth_lib
+    from sern_jax.grasp.world import depth as depth_lib
     params = depth_lib.overhead_params(config.camera)
     return (context._camera_model(model), context._geom_poses(model, poses), params, kn, kc)
 

@@ -10,7 +10,8 @@ import concurrent.futures
 import jax
 import numpy as np
 
-from sern_jax.grasp import context, objects, runner
+from sern_jax.grasp.world import context, objects
+from sern_jax.grasp.online import runner
 
 NAMES = ["triangular_prism", "tless_part_a", "detergent_bottle", "pipe_tee_steel",
          "tless_part_a_steel", "tless_part_b_steel"]

@@ -57,7 +57,8 @@ def main():
 
     jax.monitoring.register_event_duration_secs_listener(on_duration)
 
-    from sern_jax.grasp import context, runner
+    from sern_jax.grasp.world import context
+    from sern_jax.grasp.online import runner
 
     wrap(runner, "_contexts_of_stream", "context_batch",
          info=lambda key, stream, r, spec, num, *a: {"stream": int(stream), "round": int(r),

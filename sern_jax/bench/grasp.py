@@ -1,0 +1,254 @@
+"""The grasp pipeline's throughput, measured: what ``sern bench grasp`` prints.
+
+:func:`grasp_benchmark` measures, on the scene of one object (default ``small_box``):
+
+* grasp trials/s for each backend (native ``mujoco.rollout``, MJX) at a few batch sizes,
+  best of ``repeats`` timed calls after one warm-up call (whose extra time is ``compile_s``
+  for MJX), and trials per CPU-second of this process (all its threads; a figure that other
+  load on a shared machine distorts less than wall-clock time);
+* depth images/s (``depth.make_renderer``) and candidate sets/s (``candidates.make_sampler``)
+  at ``depth_batch`` images;
+* whole grasp contexts/s (``context.make_contexts``: resting poses, depth, candidates) at
+  ``context_poses`` poses per call (different poses each call, one shared scene);
+* a time split per stage (first context incl. compiles, depth per image, candidates per set,
+  one context, one trial per backend), and the quality network's rates
+  (``quality_net.benchmark``).
+
+:func:`measure_agreement` is the paired native-vs-MJX agreement of trial outcomes. Every figure
+is measured in the call on this machine (``machine``: :func:`sern_jax.infra.io.machine`); timings
+use :func:`sern_jax.infra.timing.time_calls`. The JSON fields are ``sern bench grasp --json``'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from typing import Callable
+
+from sern_jax.infra import io, timing
+
+__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "random_grasps"]
+
+
+@dataclasses.dataclass(frozen=True)
+class GraspBenchConfig:
+    """What :func:`grasp_benchmark` measures (``sern bench grasp``'s flags)."""
+
+    object: str = "small_box"  # object name or .obj/.stl path
+    native_batches: tuple[int, ...] = (64, 256)  # native batch sizes; () skips
+    mjx_batches: tuple[int, ...] = (16, 64)  # MJX batch sizes; () skips
+    depth_batch: int = 16  # images per depth call (0 skips depth and candidates)
+    context_poses: tuple[int, ...] = (16,)  # poses per make_contexts call; () skips
+    threads: int | None = None  # native threads (None: all cores)
+    repeats: int = 2  # timed calls per setting
+    quality_sets: int = 16  # 64-candidate sets per quality-network scoring call (0 skips)
+    quality_batch: int = 64  # minibatch of the quality-network training-step timing
+
+
+def random_grasps(key, model, n):
+    """n grasps near the object: centre + U[±2 cm] in x, y, θ ~ U[-π/2, π/2); key consumed."""
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp.world import scene as scene_lib
+
+    data = scene_lib.initial_data(model)
+    ids = scene_lib.scene_ids(model)
+    centre = data.xipos[ids.object_body]
+    u = np.asarray(jax.random.uniform(key, (n, 3)), np.float64)
+    g = np.empty((n, 4))
+    g[:, 0] = centre[0] + (u[:, 0] * 2 - 1) * 0.02
+    g[:, 1] = centre[1] + (u[:, 1] * 2 - 1) * 0.02
+    g[:, 2] = centre[2]
+    g[:, 3] = (u[:, 2] - 0.5) * np.pi
+    return g
+
+
+def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict:
+    """Paired native vs MJX outcomes on the same grasps and noise, per object.
+
+    Args:
+      objects: object names, mesh paths or ObjectSpecs.
+      trials_per_object: N paired trials each (``random_grasps`` + ``sim.sample_noise``).
+      seed: root seed; object i uses ``fold_in(key(seed), i)`` and resting pose seed i.
+      progress: optional callback(name, stats).
+
+    Returns:
+      dict with per-object stats, the total number of trials and the pooled agreement.
+    """
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp.world import objects as objects_lib
+    from sern_jax.grasp.world import scene as scene_lib
+    from sern_jax.grasp.world import sim
+
+    per_object, agree, total = {}, 0, 0
+    root = jax.random.key(seed)
+    for i, obj in enumerate(objects):
+        is_spec = isinstance(obj, objects_lib.ObjectSpec)
+        spec = obj if is_spec else objects_lib.resolve_object(obj)
+        name = spec.name
+        model = scene_lib.build_scene(spec, seed=i)
+        key = jax.random.fold_in(root, i)
+        k_grasp, k_noise = jax.random.split(key)
+        grasps = random_grasps(k_grasp, model, trials_per_object)
+        noise = sim.sample_noise(k_noise, trials_per_object)
+        t0 = time.perf_counter()
+        native = sim.GraspSimulator(model, "native").run_trials(grasps, noise)
+        t1 = time.perf_counter()
+        mjx = sim.GraspSimulator(model, "mjx").run_trials(grasps, noise)
+        t2 = time.perf_counter()
+        stats = sim.agreement(native, mjx)
+        stats.update(native_s=round(t1 - t0, 3), mjx_s_incl_compile=round(t2 - t1, 3))
+        per_object[name] = stats
+        agree += int(np.sum(native.success == mjx.success))
+        total += trials_per_object
+        if progress:
+            progress(name, stats)
+    return {
+        "objects": per_object,
+        "num_trials": total,
+        "agreement": agree / total if total else None,
+    }
+
+
+def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
+                    log: Callable[[str], None] | None = None) -> dict:
+    """Runs the measurements of ``cfg`` in this process; returns the JSON object of
+    ``sern bench grasp --json`` (without ``agreement``). ``log`` receives one line per
+    figure as it is measured."""
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp.world import context as context_lib
+    from sern_jax.grasp.world import objects as objects_lib
+    from sern_jax.grasp.world import scene as scene_lib
+    from sern_jax.grasp.world import sim
+
+    log = log or (lambda msg: None)
+    spec = objects_lib.resolve_object(cfg.object)
+    native_batches, mjx_batches = list(cfg.native_batches), list(cfg.mjx_batches)
+    depth_batch, context_poses, repeats = cfg.depth_batch, list(cfg.context_poses), cfg.repeats
+    out = {"benchmark": "grasp", "object": spec.name, "machine": io.machine(devices=True)}
+    config = sim.TrialConfig()
+    out["trial_steps"] = config.num_steps
+    key = jax.random.key(0)
+    t0 = time.perf_counter()
+    ctx = context_lib.make_context(key, spec)  # scene, resting pose, depth, candidates
+    model = ctx.model
+    stages = {"context_first_s": time.perf_counter() - t0}
+    out["timestep"] = float(model.opt.timestep)
+    grasp = scene_lib.centred_grasp(model)
+    grasps_all = np.tile(grasp, (max(native_batches + mjx_batches + [1]), 1))
+
+    def time_backend(backend, batches, **kw):
+        results, compile_s = [], None
+        simulator = sim.GraspSimulator(model, backend, **kw)
+        for b in batches:
+            noise = sim.sample_noise(jax.random.fold_in(key, b), b)
+            g = grasps_all[:b]
+            tm = timing.time_calls(lambda: simulator.run_trials(g, noise), repeats, warmup=1)
+            res, first, best, best_cpu = tm.result, tm.first_s, tm.best_s, tm.best_cpu_s
+            if compile_s is None:
+                compile_s = max(first - best, 0.0)
+            row = {
+                "batch": b,
+                "trials_per_s": b / best,
+                "physics_steps_per_s": b * config.num_steps / best,
+                "seconds": best,
+                "cpu_seconds": best_cpu,
+                "trials_per_cpu_s": b / best_cpu,
+                "first_call_s": first,
+                "success_rate": float(res.success.mean()),
+                "nan": int(res.nan.sum()),
+            }
+            log(
+                f"{backend:6s} batch {b:6d}: {row['trials_per_s']:9.1f} trials/s "
+                f"(first call {first:.1f} s, success {row['success_rate']:.2f})"
+            )
+            results.append(row)
+        return results, compile_s
+
+    backends = {}
+    threads = cfg.threads or os.cpu_count()
+    if native_batches:
+        rows, _ = time_backend("native", native_batches, num_threads=threads)
+        backends["native"] = {"threads": threads, "batches": rows}
+        stages["native_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
+    if mjx_batches:
+        rows, compile_s = time_backend("mjx", mjx_batches)
+        backends["mjx"] = {"batches": rows, "compile_s": compile_s}
+        stages["mjx_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
+    out["backends"] = backends
+
+    # Depth images and candidate sets (depth.py and candidates.py on this scene).
+    if depth_batch:
+        from sern_jax.grasp.world import candidates as cand_lib
+        from sern_jax.grasp.world import depth as depth_lib
+
+        cam = depth_lib.CameraConfig()
+        params = ctx.camera
+        mx = depth_lib.camera_model(model)
+        poses = depth_lib.geom_poses(scene_lib.initial_data(model))
+        batch_poses = jax.tree.map(
+            lambda a: jax.numpy.broadcast_to(a, (depth_batch, *a.shape)), poses
+        )
+        batch_params = jax.tree.map(
+            lambda a: jax.numpy.broadcast_to(a, (depth_batch, *jax.numpy.shape(a))),
+            params,
+        )
+        render = depth_lib.make_renderer(cam)
+        tm = timing.time_calls(lambda: render(mx, batch_poses, batch_params), repeats)
+        img, first, best = tm.result, tm.first_s, tm.best_s
+        out["depth"] = {
+            "batch": depth_batch,
+            "shape": list(cam.shape),
+            "images_per_s": depth_batch / best,
+            "compile_s": max(first - best, 0.0),
+        }
+        stages["depth_image_s"] = best / depth_batch
+        log(f"depth  batch {depth_batch:6d}: {depth_batch / best:9.1f} images/s")
+        sampler = cand_lib.make_sampler(cand_lib.CandidateConfig())
+        keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(
+            jax.numpy.arange(depth_batch)
+        )
+        tm = timing.time_calls(lambda: sampler(keys, img.depth, params), repeats)
+        c, first, best = tm.result, tm.first_s, tm.best_s
+        out["candidates"] = {
+            "batch": depth_batch,
+            "num_candidates": int(c.grasps.shape[-2]),
+            "sets_per_s": depth_batch / best,
+            "valid_fraction": float(np.mean(c.valid)),
+            "compile_s": max(first - best, 0.0),
+        }
+        stages["candidate_set_s"] = best / depth_batch
+        log(f"cands  batch {depth_batch:6d}: {depth_batch / best:9.1f} sets/s")
+    # Whole contexts (scene poses + depth + candidates) per second, context.make_contexts.
+    if context_poses:
+        rows = []
+        for num in context_poses:
+            keys = [jax.random.fold_in(key, 1000 + r) for r in range(repeats + 1)]
+            call = iter(keys)
+            tm = timing.time_calls(
+                lambda: context_lib.make_contexts(next(call), spec, num, model=model), repeats)
+            first, best = tm.first_s, tm.best_s
+            rows.append(
+                {"poses": num, "contexts_per_s": num / best, "first_call_s": first}
+            )
+            log(f"contexts P {num:6d}: {num / best:9.1f} contexts/s")
+        out["contexts"] = rows
+        stages["context_s"] = 1.0 / rows[-1]["contexts_per_s"]
+    if cfg.quality_sets > 0:
+        # The quality network beside the simulator in the same run: 64-candidate sets
+        # scored per second (crops + network, batched) and Adam steps per second.
+        from sern_jax.grasp.model import quality_net
+
+        qn = quality_net.benchmark(num_sets=cfg.quality_sets,
+                                   batch_size=cfg.quality_batch)
+        out["quality_net"] = qn
+        log(f"quality net: {qn['sets_scored_per_s']:.0f} sets of 64 scored/s, "
+            f"{qn['train_steps_per_s']:.0f} train steps/s (batch {cfg.quality_batch})")
+    out["stages"] = stages
+    return out

@@ -1,0 +1,196 @@
+"""The shipped pretrained network θ0 and core set C: package data with a manifest.
+
+``sern grasp pretrain --install`` writes, into ``sern_jax/grasp/data/``:
+
+* ``theta0.msgpack``: the quality network's ``QualityParams`` (weights + input normaliser),
+  flax serialisation;
+* ``core_set.npz``: the k = 172 crops chosen by the DPP from D0 (``dpp_*`` arrays) and, for
+  the ablation, k crops chosen uniformly at random (``random_*``), each with grasp depth and
+  label, stored as float16 crops (a few hundred kB);
+* ``manifest.json``: how they were made (command, seed, commit, D0 size, training settings,
+  held-out metrics, the network config), so anyone can regenerate them.
+
+:func:`load_theta0` reads them (cached); a user needs no pretraining to start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sern_jax.infra import io
+from sern_jax.grasp.model import quality_net as qn
+
+__all__ = [
+    "DATA_DIR",
+    "Theta0",
+    "save",
+    "load_theta0",
+    "core_set_data",
+    "CORE_SET_KINDS",
+    "install",
+    "hard_set",
+    "tree_arrays",
+    "tree_from_arrays",
+]
+
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"  # sern_jax/grasp/data
+THETA0_FILE = "theta0.msgpack"
+CORE_FILE = "core_set.npz"
+MANIFEST_FILE = "manifest.json"
+SCREEN_FILE = "screen.json"
+FILES = (THETA0_FILE, CORE_FILE, MANIFEST_FILE, SCREEN_FILE)
+CORE_SET_KINDS = ("dpp", "random", "none")
+HARD_BEST_FLOOR = 0.8  # = pretrain.HARD_RULE["min_best_success"] (pretrain imports this module)
+
+
+class Theta0(NamedTuple):
+    """A pretrained network and where it came from."""
+
+    network: qn.QualityNetwork
+    params: qn.QualityParams
+    core: dict  # {"dpp_image" [k, S, S], "dpp_depth" [k], "dpp_label" [k], "random_*" ...}
+    manifest: dict
+    fingerprint: str  # sha256 of the serialised params (16 hex digits)
+    screen: dict | None = None  # the hard-set screen made with this θ0 (screen.json)
+
+
+def _config_from(manifest: dict) -> qn.QualityNetConfig:
+    fields = {f.name for f in dataclasses.fields(qn.QualityNetConfig)}
+    raw = {k: (tuple(v) if isinstance(v, list) else v)
+           for k, v in manifest["network_config"].items() if k in fields}
+    return qn.QualityNetConfig(**raw)
+
+
+def save(
+    out_dir: str | Path,
+    network: qn.QualityNetwork,
+    params: qn.QualityParams,
+    core: dict[str, np.ndarray],
+    manifest: dict,
+) -> Path:
+    """Writes θ0, the core sets and the manifest into ``out_dir`` (atomically, each)."""
+    from flax import serialization
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    blob = serialization.to_bytes(jax.device_get(params))
+    io.save_bytes(out_dir / THETA0_FILE, blob)
+    stored = {k: (np.asarray(v, np.float16) if k.endswith("_image") else np.asarray(v))
+              for k, v in core.items()}
+    io.save_npz(out_dir / CORE_FILE, **stored)
+    manifest = dict(manifest)
+    manifest["network_config"] = dataclasses.asdict(network.config)
+    manifest["theta0_sha256"] = hashlib.sha256(blob).hexdigest()
+    io.save_json(out_dir / MANIFEST_FILE, manifest)
+    return out_dir
+
+
+@functools.lru_cache(maxsize=4)
+def _load(path: str) -> Theta0:
+    from flax import serialization
+
+    root = Path(path)
+    missing = [f for f in (THETA0_FILE, CORE_FILE, MANIFEST_FILE) if not (root / f).exists()]
+    if missing:
+        raise ValueError(
+            f"no pretrained network in {root} (missing {', '.join(missing)}); make one with "
+            "`sern grasp dataset` then `sern grasp pretrain --install`")
+    manifest = io.load_json(root / MANIFEST_FILE)
+    network = qn.make_quality_network(_config_from(manifest))
+    blob = (root / THETA0_FILE).read_bytes()
+    digest = hashlib.sha256(blob).hexdigest()
+    if manifest.get("theta0_sha256") not in (None, digest):
+        raise ValueError(f"{root / THETA0_FILE} does not match its manifest (sha256 "
+                         f"{digest[:16]} != {manifest['theta0_sha256'][:16]})")
+    template = network.init(jax.random.key(0))
+    try:
+        params = serialization.from_bytes(template, blob)
+    except Exception as exc:  # noqa: BLE001 - msgpack/flax raise many types on bad bytes
+        raise ValueError(f"{root / THETA0_FILE} is damaged ({type(exc).__name__}); restore "
+                         "it (reinstall sern_jax, or rerun `sern grasp pretrain --install`), "
+                         "or pass another --theta0") from None
+    params = jax.tree.map(jnp.asarray, params)
+    core = io.load_npz(root / CORE_FILE, advice="restore it (reinstall sern_jax, or rerun "
+                       "`sern grasp pretrain --install`), or pass another --theta0")
+    screen = io.load_json(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
+    return Theta0(network, params, core, manifest, digest[:16], screen)
+
+
+def load_theta0(path: str | Path | None = None) -> Theta0:
+    """The pretrained θ0 and core sets (default: the package's shipped copy)."""
+    return _load(str(Path(path) if path is not None else DATA_DIR))
+
+
+def core_set_data(kind: str, theta0: Theta0) -> qn.TrainData:
+    """The core set C as training rows (weight 1 each); ``"none"`` gives zero rows."""
+    if kind not in CORE_SET_KINDS:
+        raise ValueError(f"core set must be one of {CORE_SET_KINDS}, got {kind!r}")
+    if kind == "none":
+        s = theta0.network.config.crop_size
+        return qn.TrainData(np.zeros((0, s, s), np.float32), np.zeros(0, np.float32),
+                            np.zeros(0, np.float32), np.zeros(0, np.float32))
+    c = theta0.core
+    image = np.asarray(c[f"{kind}_image"], np.float32)
+    return qn.TrainData(image, np.asarray(c[f"{kind}_depth"], np.float32),
+                        np.asarray(c[f"{kind}_label"], np.float32),
+                        np.ones(len(image), np.float32))
+
+
+def install(src_dir: str | Path, dst_dir: str | Path = DATA_DIR) -> Path:
+    """Copies θ0, the core sets, the manifest and the screen from a pretrain run directory
+    into ``dst_dir`` (default: the package data that ``load_theta0()`` reads)."""
+    src, dst = Path(src_dir), Path(dst_dir)
+    missing = [f for f in FILES if not (src / f).exists()]
+    if missing:
+        raise ValueError(f"{src} lacks {', '.join(missing)}: run `sern grasp pretrain` first")
+    for f in FILES:
+        io.save_bytes(dst / f, (src / f).read_bytes())
+    _load.cache_clear()
+    return dst
+
+
+def hard_set(theta0: Theta0, num: int = 6) -> dict:
+    """The objects the online experiments use, from the screen shipped with θ0.
+
+    The rule (``pretrain.HARD_RULE``, :func:`pretrain.is_hard`): θ0's greedy choice succeeds
+    at most 60 % of the time while the chosen best candidate succeeds at least 80 % on fresh
+    trials, independent of those that chose it. When fewer than ``num`` objects meet it,
+    the set is filled with the objects of lowest θ0 greedy success among those whose best
+    candidate succeeds at least 80 % on the fresh trials (so there is something to learn),
+    and ``meets_rule`` says which ones are which. A screen made before the fresh trials
+    (rows without ``best_success_fresh``) is read with its biased ``best_success``.
+
+    Returns:
+      {"objects": [names], "meets_rule": [bools], "rows": [screen rows of those objects]}.
+    """
+    if not theta0.screen:
+        raise ValueError("this θ0 has no screen.json: run `sern grasp screen --json-out "
+                         "DIR/screen.json` for its directory, or name the objects")
+    floor = HARD_BEST_FLOOR
+    rows = [r for r in theta0.screen["objects"]
+            if r.get("best_success_fresh", r["best_success"]) >= floor]
+    rows.sort(key=lambda r: (not r["hard"], r["greedy_success"], r["object"]))
+    chosen = rows[:num]
+    return {"objects": [r["object"] for r in chosen],
+            "meets_rule": [bool(r["hard"]) for r in chosen], "rows": chosen}
+
+
+def tree_arrays(tree, prefix: str) -> dict[str, np.ndarray]:
+    """The leaves of ``tree`` as ``{f"{prefix}{i}": array}``: a pytree in a checkpoint npz
+    (``online.run``, ``online.AskTell``, ``pretrain``; read back by :func:`tree_from_arrays`)."""
+    return {f"{prefix}{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(tree))}
+
+
+def tree_from_arrays(saved: dict, template, prefix: str):
+    """The pytree of ``template``'s structure whose leaves :func:`tree_arrays` saved."""
+    num = len(jax.tree.leaves(template))
+    return jax.tree.unflatten(jax.tree.structure(template),
+                              [jnp.asarray(saved[f"{prefix}{i}"]) for i in range(num)])

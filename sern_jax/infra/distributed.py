@@ -1,0 +1,444 @@
+"""Scale-out on Ray: units of work as Ray tasks, each writing its files into the run directory.
+
+The run directories already resume by unit of work: a regret seed chunk, a D0 shard, a grid
+cell, a grasp-learning object (all its learner copies: ``sern_jax.grasp.online.learn_units``). This module runs such units as Ray tasks instead of in the calling process, so that one
+command spreads over every core of a machine or over a cluster (issue 20):
+
+* a :class:`Unit` is ``fn(*args)``: a module-level function that computes one unit and
+  writes its result file(s) atomically (``io.save_npz`` / ``io.save_json``: temporary file,
+  ``fsync``, ``os.replace``) at the same path, with the same bytes, as the single-process
+  run. The caller lists only the units whose files are missing (or damaged: ``io``
+  verifies them), so an interrupted or partly failed Ray run resumes with the same command,
+  and a run equals the single-process one bit for bit because both call the same ``fn``;
+* :func:`run_units` submits every unit as a task (``num_cpus``, ``num_gpus``, Ray's
+  ``max_retries`` for a worker that dies mid-task, e.g. killed or out of memory), waits for
+  them, and on the first task that fails for good (an exception in ``fn``, or a worker that
+  died ``max_retries + 1`` times) cancels the others and raises :class:`UnitFailedError`:
+  one line naming the unit and the error. Finished units are on disk and are kept.
+* JAX in workers: every task gets environment variables set before its worker imports jax:
+  ``JAX_COMPILATION_CACHE_DIR`` (a persistent compilation cache, by default
+  ``<run dir>/.jax_cache``, so a program compiles once per cluster, not once per worker),
+  the CPU threads per task (``XLA_FLAGS`` intra-op threads, ``OMP_NUM_THREADS``, and
+  ``SERN_CPU_THREADS``, which :func:`sern_jax.engine.drive.host_workers` honours; a CPU task
+  also pins its worker process to as many cores of its own: :func:`_pin_cores`), and
+  ``JAX_PLATFORMS=cpu`` for tasks that ask for no GPU (so eight CPU tasks on a GPU machine
+  do not each grab the GPU); tasks with ``gpus_per_task > 0`` ask Ray for ``num_gpus``.
+
+The driver (the process that runs the command) holds the run directory's lock
+(``io.run_lock``); workers write only deterministic unit files, so two workers that compute
+the same unit (a retry after a lost reply) write the same bytes.
+
+Ray stays optional: importing this module does not import ray; :func:`require_ray` does, and
+turns a missing installation into one line naming ``--ray`` and the ``[ray]`` extra.
+
+Security: Ray 2.60 turns token authentication on by default. Keep it on, and never expose a
+head node's ports: anyone who reaches an open Ray head can run code on every node
+(``docs/CLUSTER.md``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+__all__ = [
+    "LOCAL",
+    "EXTRA",
+    "RayConfig",
+    "Unit",
+    "UnitFailedError",
+    "add_arguments",
+    "check_backend",
+    "from_args",
+    "require_ray",
+    "worker_env",
+    "run_units",
+]
+
+LOCAL = "local"  # --ray without an address: start a Ray on this machine
+EXTRA = "pip install -e '.[ray]'"
+_CACHE_DIR = ".jax_cache"
+
+
+@dataclasses.dataclass(frozen=True)
+class RayConfig:
+    """How a command runs its units on Ray (``--ray`` and its companion flags).
+
+    Attributes:
+      address: ``"local"`` starts a Ray on this machine for the run (stopped after it);
+        ``"auto"`` joins the running cluster (``ray start`` on this machine); anything else
+        is a cluster address (``host:port`` or ``ray://host:port``).
+      workers: local Ray only: concurrent tasks (the local Ray gets ``workers *
+        cpus_per_task`` CPUs); None: every core.
+      cpus_per_task: CPUs Ray reserves per task, and the CPU threads the task's JAX uses.
+      gpus_per_task: GPUs Ray reserves per task (0: the task runs JAX on the CPU).
+      max_retries: how often Ray reruns a task whose worker died (killed, out of memory).
+      spread: Ray's SPREAD scheduling (tasks spread over nodes rather than packed).
+      cache_dir: JAX's persistent compilation cache; None: ``<run dir>/.jax_cache``.
+      pin_cores: CPU tasks pin their worker process to ``cpus_per_task`` cores of their own
+        (claimed per node by file locks), so that JAX's and XLA's threads of one task do not
+        spread over the cores other tasks run on.
+    """
+
+    address: str = LOCAL
+    workers: int | None = None
+    cpus_per_task: int = 1
+    gpus_per_task: float = 0.0
+    max_retries: int = 3
+    spread: bool = False
+    cache_dir: str | None = None
+    pin_cores: bool = True
+
+    def __post_init__(self):
+        if not isinstance(self.address, str) or not self.address.strip():
+            raise ValueError(f"--ray: the address must be 'auto' or host:port, got "
+                             f"{self.address!r}")
+        if self.workers is not None and (isinstance(self.workers, bool) or self.workers < 1):
+            raise ValueError(f"--ray-workers must be an integer >= 1, got {self.workers!r}")
+        if self.workers is not None and self.address != LOCAL:
+            raise ValueError("--ray-workers sizes the local Ray that --ray without an address "
+                             "starts; a cluster's size is set where it was started")
+        if isinstance(self.cpus_per_task, bool) or self.cpus_per_task < 1:
+            raise ValueError(f"--ray-cpus must be an integer >= 1, got {self.cpus_per_task!r}")
+        if not 0.0 <= float(self.gpus_per_task) <= 64 or self.gpus_per_task != \
+                self.gpus_per_task:
+            raise ValueError(f"--ray-gpus must be a number in [0, 64], got "
+                             f"{self.gpus_per_task!r}")
+        if isinstance(self.max_retries, bool) or not 0 <= self.max_retries <= 1000:
+            raise ValueError(f"--ray-retries must be an integer in [0, 1000], got "
+                             f"{self.max_retries!r}")
+
+
+class Unit(NamedTuple):
+    """One unit of work: ``fn(*args)`` computes it and writes its file(s) atomically.
+
+    ``fn`` must be a module-level function (Ray ships it by reference), importable on every
+    node; ``name`` is what messages call the unit (its file name).
+    """
+
+    name: str
+    fn: Callable[..., Any]
+    args: tuple
+
+
+class UnitFailedError(RuntimeError):
+    """A unit failed for good on Ray; ``str(error)`` is one line naming the unit and error."""
+
+    def __init__(self, unit: str, error: str):
+        self.unit = unit
+        self.error = error
+        super().__init__(f"--ray: unit {unit} failed: {error}; every finished unit is kept, "
+                         "rerun the same command to resume")
+
+
+def add_arguments(parser, *, gpus_default: float = 0.0) -> None:
+    """Adds ``--ray [ADDRESS]`` and its companions to an argparse parser."""
+    parser.add_argument(
+        "--ray", nargs="?", const=LOCAL, default=None, metavar="ADDRESS",
+        help="run the units of work as Ray tasks (needs the [ray] extra: "
+             f"{EXTRA}); no ADDRESS starts a local Ray, 'auto' joins the cluster started on "
+             "this machine with `ray start`, host:port another one; same run directory and "
+             "results as without --ray")
+    parser.add_argument("--ray-workers", type=int, default=None, metavar="N",
+                        help="with --ray and no address: concurrent tasks of the local Ray "
+                             "(default: every core)")
+    parser.add_argument("--ray-cpus", type=int, default=1, metavar="N",
+                        help="with --ray: CPUs (and JAX CPU threads) per task")
+    parser.add_argument("--ray-gpus", type=float, default=gpus_default, metavar="G",
+                        help="with --ray: GPUs per task (0: tasks compute on the CPU)")
+    parser.add_argument("--ray-retries", type=int, default=3, metavar="N",
+                        help="with --ray: reruns of a task whose worker died")
+
+
+def from_args(args) -> RayConfig | None:
+    """The :class:`RayConfig` of parsed arguments (None without ``--ray``), validated.
+
+    Raises ValueError (one line naming the flag) for a bad value, a companion flag given
+    without ``--ray``, or ``--ray`` when ray is not installed; imports ray only to check that.
+    """
+    address = getattr(args, "ray", None)
+    if address is None:
+        for flag, name, default in (("--ray-workers", "ray_workers", None),
+                                    ("--ray-cpus", "ray_cpus", 1),
+                                    ("--ray-gpus", "ray_gpus", 0.0),
+                                    ("--ray-retries", "ray_retries", 3)):
+            if getattr(args, name, default) != default:
+                raise ValueError(f"{flag} applies to --ray runs; add --ray")
+        return None
+    config = RayConfig(address=address, workers=getattr(args, "ray_workers", None),
+                       cpus_per_task=getattr(args, "ray_cpus", 1),
+                       gpus_per_task=float(getattr(args, "ray_gpus", 0.0)),
+                       max_retries=getattr(args, "ray_retries", 3))
+    require_ray()
+    return config
+
+
+def check_backend(backend: str, config: RayConfig | None) -> None:
+    """Refuses ``--backend mjx`` on Ray without ``--ray-gpus``: its tasks would run MJX on
+    their CPUs (``JAX_PLATFORMS=cpu``), another float program than a GPU run, and the run
+    fingerprint does not name the platform, so a GPU-started run directory resumed that way
+    would mix the two. One line naming the flag (ValueError)."""
+    if config is not None and backend == "mjx" and not config.gpus_per_task > 0:
+        raise ValueError("--backend mjx with --ray needs --ray-gpus G > 0 (without it the "
+                         "tasks run MJX on the CPU, another float program than a GPU run of "
+                         "the same run directory); or use --backend native")
+
+
+def require_ray():
+    """Imports ray, or raises ValueError: one line naming ``--ray`` and the extra."""
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(f"--ray needs Ray, which is not installed: {EXTRA} (or pip install "
+                         "'sern_jax[ray]')") from None
+    return ray
+
+
+def _xla_flags(existing: str, threads: int) -> str:
+    """``existing`` without its thread flags, plus this task's."""
+    keep = [f for f in existing.split() if not f.startswith(
+        ("--xla_cpu_multi_thread_eigen", "intra_op_parallelism_threads"))]
+    mine = (["--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1"]
+            if threads == 1 else [f"intra_op_parallelism_threads={threads}"])
+    return " ".join(keep + mine)
+
+
+def worker_env(config: RayConfig, run_dir: str | os.PathLike) -> dict[str, str]:
+    """Environment variables of every task (set before the worker imports jax)."""
+    threads = int(config.cpus_per_task)
+    cache = config.cache_dir or os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(
+        Path(run_dir).resolve() / _CACHE_DIR)
+    env = {
+        "SERN_CPU_THREADS": str(threads),
+        "OMP_NUM_THREADS": str(threads),
+        "OPENBLAS_NUM_THREADS": str(threads),
+        "MKL_NUM_THREADS": str(threads),
+        "XLA_FLAGS": _xla_flags(os.environ.get("XLA_FLAGS", ""), threads),
+        "JAX_COMPILATION_CACHE_DIR": cache,
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "disable"),
+    }
+    if config.pin_cores and config.gpus_per_task == 0:
+        env["SERN_PIN_CORES"] = "1"
+    if config.gpus_per_task > 0:
+        if config.gpus_per_task < 1:  # several tasks share a GPU: no preallocation
+            env["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
+        if os.environ.get("JAX_PLATFORMS"):
+            env["JAX_PLATFORMS"] = os.environ["JAX_PLATFORMS"]
+    else:
+        env["JAX_PLATFORMS"] = "cpu"
+    return env
+
+
+_PIN: dict[str, Any] = {}  # this worker process's claimed cores (lock fds, cores)
+
+
+def _pin_cores(threads: int) -> list[int] | None:
+    """Pins this worker process (every thread it has, and so the threads they start) to
+    ``threads`` cores no other pinned worker of this node holds, claimed by an exclusive
+    ``flock`` on ``<tmp>/sern-ray-cores/core-<i>`` for the life of the process (the kernel
+    releases it when the process dies). Called before the unit's first JAX call, so XLA's CPU
+    thread pool is sized to the claimed cores. None (unpinned) when too few cores are free."""
+    if "cores" in _PIN:
+        return _PIN["cores"]
+    import fcntl
+    import tempfile
+
+    lock_dir = Path(tempfile.gettempdir()) / "sern-ray-cores"
+    fds, cores = [], []
+    try:
+        lock_dir.mkdir(exist_ok=True)
+        with contextlib.suppress(OSError):
+            os.chmod(lock_dir, 0o1777)  # other users' workers claim cores here too
+        candidates = sorted(os.sched_getaffinity(0))
+    except OSError:  # no usable lock directory: run unpinned
+        candidates = []
+    for core in candidates:
+        try:
+            fd = os.open(lock_dir / f"core-{core}", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC,
+                         0o666)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        fds.append(fd)
+        cores.append(core)
+        if len(cores) == threads:
+            break
+    if len(cores) < threads:
+        for fd in fds:
+            os.close(fd)
+        _PIN["cores"] = None
+        return None
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), cores)
+        except OSError:
+            pass
+    _PIN.update(cores=cores, fds=fds)
+    return cores
+
+
+def _call_unit(fn: Callable[..., Any], args: tuple) -> dict[str, Any]:
+    """The Ray task: runs one unit; returns its wall and CPU seconds and where it ran."""
+    cores = None
+    if os.environ.get("SERN_PIN_CORES") == "1" and hasattr(os, "sched_setaffinity"):
+        cores = _pin_cores(int(os.environ.get("SERN_CPU_THREADS", "1")))
+    start, cpu = time.perf_counter(), os.times()
+    fn(*args)
+    end = os.times()
+    import socket
+
+    return {"seconds": time.perf_counter() - start,
+            "cpu_seconds": (end.user - cpu.user) + (end.system - cpu.system),
+            "threads": len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task")
+            else None,
+            "cores": cores, "pid": os.getpid(), "host": socket.gethostname()}
+
+
+def _one_line(text: str, limit: int = 300) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _describe(exc: BaseException, max_retries: int) -> str:
+    """One line for a failed task: the original exception where Ray wraps one."""
+    ray = require_ray()
+    cause = getattr(exc, "cause", None)
+    if isinstance(exc, ray.exceptions.RayTaskError) and cause is not None:
+        text = str(cause) or ""
+        return _one_line(f"{type(cause).__name__}: {text}" if text else type(cause).__name__)
+    if isinstance(exc, (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError,
+                        ray.exceptions.NodeDiedError)):
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        return _one_line(f"{type(exc).__name__}: its worker died {max_retries + 1} times "
+                         f"(--ray-retries {max_retries}); {first}")
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return _one_line(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
+
+
+def _init(ray, config: RayConfig) -> bool:
+    """Connects to (or starts) Ray; True when this call started it (and must stop it)."""
+    if ray.is_initialized():
+        return False
+    kwargs: dict[str, Any] = dict(logging_level=logging.WARNING, log_to_driver=True,
+                                  configure_logging=True)
+    if config.address == LOCAL:
+        cpus = None if config.workers is None else config.workers * config.cpus_per_task
+        ray.init(address="local", num_cpus=cpus, include_dashboard=False, **kwargs)
+    else:
+        try:
+            ray.init(address=config.address, **kwargs)
+        except (ConnectionError, RuntimeError, ValueError) as exc:  # no cluster there
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise ValueError(f"--ray {config.address}: cannot join a Ray cluster there "
+                             f"({_one_line(first, 160)})") from None
+    return True
+
+
+def _check_feasible(ray, config: RayConfig) -> None:
+    """A task no node can hold would wait forever: one line naming the flag instead."""
+    nodes = [n.get("Resources", {}) for n in ray.nodes() if n.get("Alive", True)]
+    for flag, key, need in (("--ray-cpus", "CPU", config.cpus_per_task),
+                            ("--ray-gpus", "GPU", config.gpus_per_task)):
+        most = max((float(r.get(key, 0.0)) for r in nodes), default=0.0)
+        if need > most:
+            raise ValueError(f"{flag} {need:g}: no node of the Ray cluster has that many "
+                             f"{key}s (the largest has {most:g})")
+
+
+def _stop(ray, refs: list, timeout: float = 30.0) -> None:
+    """Stops the other tasks once a unit failed for good, quietly.
+
+    They are cancelled with ``force=True``: a running one's worker process is killed, as a
+    lost worker would be (its unit file is written atomically, so a killed task leaves no
+    partial unit), instead of a KeyboardInterrupt raised inside running JAX or MuJoCo code,
+    which could abort the worker with a "Fatal Python error: Aborted" that Ray forwards to
+    the driver's stderr. Their outcomes are then collected (up to ``timeout`` seconds), so
+    that Ray logs no "Unhandled error" for a sibling that had failed too.
+    """
+    for ref in refs:
+        ray.cancel(ref, force=True)
+    done, _ = ray.wait(list(refs), num_returns=len(refs), timeout=timeout)
+    for ref in done:
+        try:
+            ray.get(ref)
+        except Exception:  # noqa: BLE001, S110 - cancelled or failed: already reported
+            pass
+
+
+def run_units(units: Sequence[Unit], config: RayConfig, run_dir: str | os.PathLike, *,
+              log: Callable[[str], None] = print, progress: bool = True,
+              desc: str = "units") -> dict[str, float]:
+    """Runs ``units`` as Ray tasks and waits for all of them.
+
+    Args:
+      units: the units still to compute (the caller skips finished ones).
+      config: resources, retries, address.
+      run_dir: the run directory (the compilation cache's default home).
+      log: where the one-line start message goes.
+      progress: a progress bar over finished units.
+      desc: the bar's label.
+
+    Returns:
+      unit name -> what its task reported (the last, successful attempt): ``seconds``,
+      ``cpu_seconds`` (the worker process's user + system time over the unit), ``threads``
+      (the process's threads after it), ``cores`` (pinned cores or None), ``pid``, ``host``.
+
+    Raises:
+      UnitFailedError: a unit failed for good (one line); the others are cancelled, and every
+        unit finished before is on disk.
+    """
+    ray = require_ray()
+    if not units:
+        return {}
+    started = _init(ray, config)
+    try:
+        _check_feasible(ray, config)
+        env = worker_env(config, run_dir)
+        options: dict[str, Any] = dict(num_cpus=config.cpus_per_task,
+                                       num_gpus=config.gpus_per_task,
+                                       max_retries=config.max_retries, retry_exceptions=False,
+                                       runtime_env={"env_vars": env})
+        if config.spread:
+            options["scheduling_strategy"] = "SPREAD"
+        task = ray.remote(_call_unit).options(**options)
+        cpus = ray.cluster_resources().get("CPU", 0)
+        log(f"Ray: {len(units)} {desc} as tasks of {config.cpus_per_task} CPU"
+            f"{'s' if config.cpus_per_task > 1 else ''}"
+            f"{f' + {config.gpus_per_task:g} GPU' if config.gpus_per_task else ''} on "
+            f"{cpus:g} CPUs ({len(ray.nodes())} node{'s' if len(ray.nodes()) > 1 else ''})")
+        refs = {task.remote(u.fn, tuple(u.args)): u for u in units}
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(units), unit=desc.rstrip("s") or "unit", desc="ray",
+                   disable=not progress)
+        seconds: dict[str, dict[str, Any]] = {}
+        pending = list(refs)
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                for ref in done:
+                    unit = refs[ref]
+                    try:
+                        seconds[unit.name] = ray.get(ref)
+                    except Exception as exc:  # noqa: BLE001 - any task failure is one line
+                        _stop(ray, pending)
+                        raise UnitFailedError(unit.name,
+                                              _describe(exc, config.max_retries)) from None
+                    bar.update(1)
+        finally:
+            bar.close()
+        return seconds
+    finally:
+        if started:
+            ray.shutdown()

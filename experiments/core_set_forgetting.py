@@ -86,6 +86,10 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="runs/forgetting")
     args = parser.parse_args(argv)
     bad = parser.error
+    try:  # the output directory before any work (nothing is left behind by the check)
+        validate.out_dir(args.out, "--out")
+    except ValueError as exc:
+        bad(str(exc))
     if not (math.isfinite(args.lr) and args.lr > 0):
         bad(f"--lr must be a finite number > 0 (got {args.lr})")
 

@@ -1,5 +1,5 @@
-"""SERN against the exploration strategies the field uses now, at the same grasp budget
-(issue 18): every registered learner on the shipped hard set, the paper's rounds.
+"""SERN against the exploration strategies the field uses now, at the same grasp budget:
+every registered learner on the shipped hard set, the paper's rounds.
 
     python -m experiments.grasp_baselines bench              # round time per learner vs sern
     python -m experiments.grasp_baselines tune   --out DIR   # main knobs, on other objects
@@ -83,11 +83,11 @@ def learners() -> tuple[str, ...]:
 
 def online_config(policies, values: dict, **kw):
     """An OnlineConfig with learner hyperparameters ``values`` (field name -> value)."""
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
 
     own = {k: v for k, v in values.items() if k in _CONFIG_FIELDS}
     hyper = {k: v for k, v in values.items() if k not in _CONFIG_FIELDS}
-    return runner.OnlineConfig(policies=tuple(policies), hyper=hyper, **own, **kw)
+    return config_lib.OnlineConfig(policies=tuple(policies), hyper=hyper, **own, **kw)
 
 
 def _specs(names):
@@ -122,10 +122,10 @@ def hard_specs():
 
 
 def _run(config, specs, out_dir, theta0, progress):
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import driver
 
     t = time.perf_counter()
-    res = runner.run(config, specs, out_dir, theta0=theta0, progress=progress)
+    res = driver.run(config, specs, out_dir, theta0=theta0, progress=progress)
     return res, time.perf_counter() - t
 
 
@@ -134,8 +134,8 @@ def _run(config, specs, out_dir, theta0, progress):
 
 def tune_setting(i: int, knobbed: tuple[str, ...], objects: list[str], seeds: int,
                  rounds: int, explore: int, backend: str, run_dir: str) -> None:
-    """Setting ``i`` of the GRID, run into ``run_dir``: the unit of ``tune --ray`` (issue 20;
-    the same ``runner.run`` call that :func:`tune` makes, which then reads the finished run
+    """Setting ``i`` of the GRID, run into ``run_dir``: the unit of ``tune --ray`` (the
+    same ``driver.run`` call that :func:`tune` makes, which then reads the finished run
     back)."""
     from sern_jax.grasp.model import artifacts
 
@@ -278,11 +278,12 @@ def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | Non
     ``meta.json`` was rewritten with these settings): its ``checkpoint.npz`` (a single-process
     run's, or a ``--ray`` run's join) and each reported object's ``units/object_*/
     checkpoint.npz`` (what a ``--ray`` run leaves, also when it stopped before any join)
-    must carry the fingerprint these settings give (``runner.run_fingerprint`` of the whole
+    must carry the fingerprint these settings give (``config.run_fingerprint`` of the whole
     run, or of that object alone). Unit folders of objects not in ``specs`` are ignored (the
     runner never reads them). Returns the run's checkpoint (None if there is none)."""
     from sern_jax.infra import io
-    from sern_jax.grasp.online import learn_units, runner
+    from sern_jax.grasp.online import config as config_lib
+    from sern_jax.grasp.online import learn_units
 
     advice = "delete it (or choose another --out) and rerun"
     mixed = (f"--out {out}: {run_dir} holds a different learning run than these settings; "
@@ -290,7 +291,7 @@ def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | Non
     ckpt = run_dir / "checkpoint.npz"
     saved = io.load_npz(ckpt, advice=advice) if ckpt.exists() else None
     if saved is not None and (str(saved.get("fingerprint", ""))
-                              != runner.run_fingerprint(config, specs, theta0)):
+                              != config_lib.run_fingerprint(config, specs, theta0)):
         raise DifferentRunError(mixed)
     # The fingerprint holds the hyperparameters given, not the defaults, so a learner
     # whose default changed (ensemble_ts: --ensemble-heads networks -> shared) has the same
@@ -312,7 +313,7 @@ def check_run_dir(out: Path, run_dir: Path, config, specs, theta0) -> dict | Non
         if not unit.exists():
             continue
         got = str(io.load_npz(unit, advice=advice).get("fingerprint", ""))
-        if got != runner.run_fingerprint(config, [spec], theta0):
+        if got != config_lib.run_fingerprint(config, [spec], theta0):
             raise DifferentRunError(mixed.replace(
                 f"{run_dir} holds", f"{unit.parent} (a --ray unit of {run_dir}) holds"))
     return saved
@@ -353,7 +354,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
         theta0_fingerprint=theta0.fingerprint,
         physics=_physics_settings(),
         axes="[R + 1, O, Q, S]: round (0 = θ0), object, learner, seed")
-    # One entry per invocation (a comparison may take several short device calls): when
+    # One entry per invocation (a comparison may take several short runs): when
     # it started, from which round, and (if it ended) its wall time, timings and trials.
     previous = out / "meta.json"
     calls = json.loads(previous.read_text()).get("calls", []) if previous.exists() else []
@@ -365,7 +366,7 @@ def run(out: Path, seeds: int, rounds: int, regret_trials: int, backend: str, un
     (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
     if ray is None:
         res, secs = _run(config, specs, run_dir, theta0, progress)
-    else:  # issue 20: the same checkpoint, each object's copies a Ray task
+    else:  # the same checkpoint, each object's copies a Ray task
         from sern_jax.grasp.online import learn_units
 
         t = time.perf_counter()
@@ -719,15 +720,16 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
 
     from sern_jax.infra import io
     from sern_jax.grasp.model import artifacts
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
+    from sern_jax.grasp.online import step
     from sern_jax.learners import base as lbase
     from sern_jax.learners import registry
 
     entries = parse_bench_learners(",".join(names) if names else None)
     theta0 = artifacts.load_theta0()
-    model = runner.quality_model(runner.copies_network(theta0.network.config))
-    core = runner.core_data("dpp", theta0)
-    config = runner.OnlineConfig(policies=("sern",))
+    model = config_lib.quality_model(config_lib.copies_network(theta0.network.config))
+    core = config_lib.core_data("dpp", theta0)
+    config = config_lib.OnlineConfig(policies=("sern",))
     train = config.train_config()
     num_o, num_s = copies
     e, k, n_eval = config.explore, 64, config.evaluate + config.eval_poses
@@ -747,11 +749,11 @@ def bench(copies: tuple[int, int], repeats: int, names=None) -> dict:
         lconf = registry.make_config(name, {**config.hyperparameters(), **values})
         configs[label] = (name, dataclasses.asdict(lconf))
         lrn = registry.make(name, model, train, lconf)
-        state = runner._batched_init(lrn.init)(keys, theta0.params, core)
-        act = runner._batched_act(lrn.act, False)  # the runner without regret accounting
-        act_probs = runner._batched_act(lrn.act, True)  # with it (π is output)
-        update = runner._batched_update(lrn.update)
-        greedy = runner._batched_greedy(runner._predict(lrn, model))
+        state = step.batched_init(lrn.init)(keys, theta0.params, core)
+        act = step.batched_act(lrn.act, False)  # the run without regret accounting
+        act_probs = step.batched_act(lrn.act, True)  # with it (π is output)
+        update = step.batched_update(lrn.update)
+        greedy = step.batched_greedy(step.predict_fn(lrn, model))
 
         def timed(state=state, act=act, act_probs=act_probs, update=update, greedy=greedy):
             """[wall, cpu] seconds of (act, act with π, update, greedy)."""
@@ -906,7 +908,7 @@ def main(argv=None) -> None:
                         "for bit)")
     from sern_jax.infra import distributed
 
-    distributed.add_arguments(p)  # --ray (issue 20): tune's settings, run's objects as tasks
+    distributed.add_arguments(p)  # --ray: tune's settings, run's objects as tasks
     a = p.parse_args(argv)
     try:  # Ray refusals: one line, exit 2
         ray = distributed.from_args(a)

@@ -1,7 +1,7 @@
 """Online grasp learning experiments: the paper's setting, a strong one, the ablations and
 the regret accounting, with their per-seed results kept.
 
-Each setting is a list of runs of ``runner.run`` (one run directory each under ``--out``,
+Each setting is a list of runs of ``driver.run`` (one run directory each under ``--out``,
 resumable round by round) on the shipped hard set. Every run writes its per-seed results,
 the command and the machine to ``--results`` (default ``experiments/results/<setting>/``):
 one small JSON per run label (``<label>.json``; ``<label>.part-<objects>.json`` when
@@ -197,7 +197,7 @@ def _comparisons(names, diffs) -> list[dict]:
 def summarise(results_dir, write: bool = True) -> dict:
     """Everything the docs quote from a setting's per-seed files (see the module doc)."""
     from sern_jax.infra import io
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import checkpoint
 
     results_dir = Path(results_dir)
     docs = load_results(results_dir)
@@ -208,8 +208,8 @@ def summarise(results_dir, write: bool = True) -> dict:
         ex, pr = d["explore_success"], d["pseudo_regret"]
         has_lv = np.isfinite(lv).all()
         has_pr = np.isfinite(pr[1:]).all() and pr.shape[0] > 1
-        rows = runner.table_rows(d["objects"], tuple(d["policies"]), pe,
-                                 lv if has_lv else None, pr if has_pr else None)
+        rows = checkpoint.table_rows(d["objects"], tuple(d["policies"]), pe,
+                                     lv if has_lv else None, pr if has_pr else None)
         pol = {}
         for q, p in enumerate(d["policies"]):
             lvq, peq = lv[:, :, q, :].mean(1), pe[:, :, q, :].mean(1)  # [R+1, S] pooled
@@ -287,8 +287,8 @@ def summarise(results_dir, write: bool = True) -> dict:
 
 
 # ----------------------------------------------------------------------------- markdown
-# docs/RESULTS.md prints these tables verbatim; tests/test_results_quoted.py rebuilds them
-# from the committed per-seed files and checks that the page holds them.
+# Markdown renderings of a summary, for a run's own report (the docs' tables are built by
+# figures/doc_tables.py from the same per-seed files).
 
 
 def _pts(x, digits: int = 1, sign: bool = True) -> str:
@@ -411,7 +411,7 @@ def collect(out, results) -> list[Path]:
     their checkpoints); finished runs already wrote theirs."""
     from sern_jax.infra import io
     from sern_jax.grasp.model import artifacts
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
 
     written = []
     for meta_file in sorted(Path(out).glob("*/run_meta.json")):
@@ -424,8 +424,8 @@ def collect(out, results) -> list[Path]:
         targets = meta.get("targets") or [{"file": meta["file"], "label": meta["label"],
                                            "setting": meta["setting"]}]
         theta0 = artifacts.load_theta0(meta.get("theta0_dir"))
-        config = runner.OnlineConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                        for k, v in meta["config"].items()})
+        config = config_lib.OnlineConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                            for k, v in meta["config"].items()})
         res = {f: saved[f] for f in FIELDS}
         for tg in targets:
             target = Path(results) / tg["file"]
@@ -456,6 +456,20 @@ def main(argv=None) -> int:
         p.prog = f"{p.prog} {argv[0]}"
         p.add_argument("dirs", nargs=1 if argv[0] == "summarise" else 2)
         a = p.parse_args(argv[1:])
+        # the directory read must exist (a typo is one line, not an exit 0 that did nothing);
+        # collect's results directory must be one this process can write
+        read = Path(a.dirs[0])
+        if not read.is_dir():
+            p.error(f"{read}: no such directory (the {'runs' if argv[0] == 'collect' else 'results'} "
+                    f"directory to {argv[0]})")
+        if argv[0] == "collect":
+            if not any(read.glob("*/run_meta.json")):
+                p.error(f"{read} holds no run of `python -m experiments.grasp_learning` (no "
+                        "*/run_meta.json)")
+            try:
+                validate.out_dir(a.dirs[1], "results directory")
+            except ValueError as exc:
+                p.error(str(exc))
         if argv[0] == "collect":
             for f in collect(*a.dirs):
                 print(f"wrote {f} (from the checkpoint)")
@@ -494,33 +508,41 @@ def main(argv=None) -> int:
                         ("--rounds", args.rounds, 1)):
         if v < lo:
             parser.error(f"{name} must be >= {lo}")
+    out = Path(args.out or f"runs/grasp_{args.setting}")
+    results = Path(args.results or ("experiments/results" if args.setting == "ablations"
+                                    else f"experiments/results/{args.setting}"))
+    try:  # every flag before anything is written or loaded
+        validate.out_dir(out, "--out")
+        validate.out_dir(results, "--results")
+        wanted_labels = (set(validate.comma_list(args.labels, "--labels"))
+                         if args.labels else set())
+        only = validate.comma_list(args.only, "--only") if args.only else []
+    except ValueError as exc:
+        parser.error(str(exc))
 
     from sern_jax.infra import io
     from sern_jax.grasp.model import artifacts
     from sern_jax.grasp.world import objects
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
+    from sern_jax.grasp.online import driver
 
     theta0 = artifacts.load_theta0()
     hard = artifacts.hard_set(theta0, num)
     all_objects = hard["objects"]
     chosen = all_objects
     if args.only:
-        chosen = args.only.split(",")
+        chosen = only
         bad = [n for n in chosen if n not in all_objects]
         if bad:
             parser.error(f"--only: {', '.join(bad)} not in the hard set {all_objects}")
         chosen = [n for n in all_objects if n in chosen]
     specs = [objects.make_object(n) for n in chosen]
     try:
-        base = runner.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds,
-                                   backend=args.backend, regret_trials=args.regret_trials,
-                                   regret_grasps=args.regret_grasps)
+        base = config_lib.OnlineConfig(num_seeds=args.seeds, rounds=args.rounds,
+                                       backend=args.backend, regret_trials=args.regret_trials,
+                                       regret_grasps=args.regret_grasps)
     except ValueError as exc:
         parser.error(str(exc))
-    out = Path(args.out or f"runs/grasp_{args.setting}")
-    results = Path(args.results or ("experiments/results" if args.setting == "ablations"
-                                    else f"experiments/results/{args.setting}"))
-    results.mkdir(parents=True, exist_ok=True)
     command = "python -m experiments.grasp_learning " + shlex.join(argv)
     print(f"{command}\nmachine: {_machine_line()}", flush=True)
     # the plan: (setting, label, config); "ablations" runs each distinct configuration of
@@ -534,12 +556,13 @@ def main(argv=None) -> int:
     for st, label, config in plan:
         groups.setdefault(config.fingerprint(), []).append((st, label, config))
     if args.labels:
-        want = set(args.labels.split(","))
+        want = wanted_labels
         known = {x for g in groups.values() for st, lb, _ in g for x in (lb, f"{st}/{lb}")}
         if want - known:
             parser.error(f"--labels: {', '.join(sorted(want - known))} not in {sorted(known)}")
         groups = {k: g for k, g in groups.items()
                   if any(lb in want or f"{st}/{lb}" in want for st, lb, _ in g)}
+    results.mkdir(parents=True, exist_ok=True)  # after every check: nothing written before
     for group in groups.values():
         st0, label0, config = group[0]
         run_dir = out / (f"{st0}.{label0}" if args.setting == "ablations" else label0
@@ -562,7 +585,7 @@ def main(argv=None) -> int:
             "config": dataclasses.asdict(config), "command": command, "file": fname,
             "targets": targets})
         t = time.perf_counter()
-        res = runner.run(config, specs, run_dir, theta0=theta0,
+        res = driver.run(config, specs, run_dir, theta0=theta0,
                          progress=not args.no_progress)
         seconds = time.perf_counter() - t
         for tg in targets:

@@ -174,7 +174,8 @@ def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
     from sern_jax.infra import io
     from sern_jax.grasp.model import artifacts
     from sern_jax.grasp.world import objects
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
+    from sern_jax.grasp.online import driver
 
     from . import grasp_learning
 
@@ -192,7 +193,7 @@ def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
     theta0 = artifacts.load_theta0()
     names = grid["objects"]
     specs = [objects.make_object(n) for n in names]
-    config = runner.OnlineConfig(num_seeds=seeds, rounds=rounds)
+    config = config_lib.OnlineConfig(num_seeds=seeds, rounds=rounds)
     command = (f"python -m experiments.grasp_sensitivity cell {cell} --out {out} "
                f"--seeds {seeds} --rounds {rounds} --objects {num_objects}")
     world_doc = {"grid": GRID, "grid_cell": cell,
@@ -205,7 +206,7 @@ def run_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects: int,
         "config": dataclasses.asdict(config), "command": command, "file": f"{cell}.json",
         "theta0_dir": None, "trial_config": dataclasses.asdict(trial),
         "scene_config": dataclasses.asdict(ctx.scene), "extra": {"world": world_doc}})
-    res = runner.run(config, specs, run_dir, theta0=theta0, progress=progress,
+    res = driver.run(config, specs, run_dir, theta0=theta0, progress=progress,
                      log=lambda *_: None, context_config=ctx, trial_config=trial)
     doc = grasp_learning.per_seed_doc(
         res["results"], label=cell, setting="sensitivity", objects=names, all_objects=names,
@@ -480,7 +481,8 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
     from sern_jax.infra import io
     from sern_jax.grasp.model import artifacts
     from sern_jax.grasp.world import objects
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as config_lib
+    from sern_jax.grasp.online import driver
 
     from . import grasp_learning
 
@@ -490,7 +492,7 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
     names = artifacts.hard_set(shipped, num_objects)["objects"]  # the same objects everywhere
     theta0 = artifacts.load_theta0(theta0_dir) if theta0_dir else shipped
     specs = [objects.make_object(n) for n in names]
-    config = runner.OnlineConfig(num_seeds=seeds, rounds=rounds, backend=backend)
+    config = config_lib.OnlineConfig(num_seeds=seeds, rounds=rounds, backend=backend)
     command = (f"python -m experiments.grasp_sensitivity transfer-cell {cell} --out {out} "
                f"--seeds {seeds} --rounds {rounds} --objects {num_objects}")
     world_doc = {"cell": cell, "note": TRANSFER_NOTES[cell],
@@ -507,7 +509,7 @@ def run_transfer_cell(cell: str, out: Path, seeds: int, rounds: int, num_objects
         "theta0_dir": theta0_dir, "trial_config": dataclasses.asdict(trial),
         "scene_config": dataclasses.asdict(ctx.scene),
         "extra": {"world": world_doc}})
-    res = runner.run(config, specs, run_dir, theta0=theta0, progress=progress,
+    res = driver.run(config, specs, run_dir, theta0=theta0, progress=progress,
                      log=lambda *_: None, context_config=ctx, trial_config=trial)
     doc = grasp_learning.per_seed_doc(
         res["results"], label=cell, setting="transfer", objects=names, all_objects=names,
@@ -594,7 +596,7 @@ def summarise_transfer(out, rounds=(1, 5, 20), level: float = 0.95) -> dict:
 
 
 def transfer_markdown(summary: dict) -> str:
-    """The transfer table docs/RESULTS.md prints (rebuilt by tests/test_results_quoted.py):
+    """The transfer table of a summary, as markdown:
     per cell θ0's success in B and the gap to A (paired t over seeds), then per policy the
     gain by rounds 5 and 20 (t over seeds) and the share of the gap it recovers."""
     from .grasp_learning import _pm
@@ -633,7 +635,7 @@ def grasp_learning_collect(out: Path) -> list:
 
 
 def sensitivity_markdown(summary: dict) -> str:
-    """The grid's table docs/RESULTS.md prints (rebuilt by tests/test_results_quoted.py):
+    """The grid's table of a summary, as markdown:
     per finished cell θ0's and SERN's final fixed-pose success and SERN − each peer
     (95 % t half-widths over seeds; Holm-adjusted p over every comparison of the table)."""
     from .grasp_learning import _pm
@@ -667,15 +669,20 @@ def t_dict(ci) -> dict:
 def _run_grid(args, transfer: bool = False) -> int:
     out = Path(args.out)
     names = TRANSFER_CELLS if transfer else CELLS
-    cells = args.cells.split(",") if args.cells else list(names)
-    for c in cells:
-        if c not in names:  # refuses an unknown cell before any work
-            raise SystemExit(f"--cells: unknown cell {c!r}; choose from {', '.join(names)}")
+    from sern_jax.infra import validate
+
+    try:  # an unknown cell, an empty item or a repeated one: refused before any work
+        cells = (validate.comma_list(args.cells, "--cells", choices=names) if args.cells
+                 else list(names))
+        validate.out_dir(out, "--out")
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     sub = "transfer-cell" if transfer else "cell"
     from sern_jax.infra import distributed
 
     try:
-        ray = distributed.from_args(args)  # --ray [ADDRESS]: cells as Ray tasks (issue 20)
+        ray = distributed.from_args(args)  # --ray [ADDRESS]: cells as Ray tasks
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
     if ray is not None and args.deadline:
@@ -799,12 +806,12 @@ def main(argv=None) -> int:
     p_cell.add_argument("cell", choices=CELLS)
     for p in (p_run, p_cell):
         p.add_argument("--out", default="runs/sensitivity")
-        p.add_argument("--seeds", type=int, default=10)
-        p.add_argument("--rounds", type=int, default=5)
-        p.add_argument("--objects", type=int, default=6)
+        p.add_argument("--seeds", type=validate.int_in(2, 10_000), default=10)
+        p.add_argument("--rounds", type=validate.int_in(1, 10_000), default=5)
+        p.add_argument("--objects", type=validate.int_in(1, 1000), default=6)
     p_run.add_argument("--cells", default="", help="comma-separated subset (default: all)")
-    p_run.add_argument("--workers", type=int, default=8)
-    p_run.add_argument("--deadline", type=float, default=0.0,
+    p_run.add_argument("--workers", type=validate.int_in(1, 4096), default=8)
+    p_run.add_argument("--deadline", type=validate.float_in(0.0), default=0.0,
                        help="seconds after which running cells are stopped (0 = none)")
     from sern_jax.infra import distributed
 
@@ -816,12 +823,12 @@ def main(argv=None) -> int:
     p_tcell.add_argument("cell", choices=TRANSFER_CELLS)
     for p in (p_tr, p_tcell):
         p.add_argument("--out", default="runs/transfer")
-        p.add_argument("--seeds", type=int, default=5)
-        p.add_argument("--rounds", type=int, default=20)
-        p.add_argument("--objects", type=int, default=3)
+        p.add_argument("--seeds", type=validate.int_in(2, 10_000), default=5)
+        p.add_argument("--rounds", type=validate.int_in(1, 10_000), default=20)
+        p.add_argument("--objects", type=validate.int_in(1, 1000), default=3)
     p_tr.add_argument("--cells", default="", help="comma-separated subset (default: all)")
-    p_tr.add_argument("--workers", type=int, default=7)
-    p_tr.add_argument("--deadline", type=float, default=0.0,
+    p_tr.add_argument("--workers", type=validate.int_in(1, 4096), default=7)
+    p_tr.add_argument("--deadline", type=validate.float_in(0.0), default=0.0,
                       help="seconds after which running cells are stopped and their "
                            "finished rounds collected (0 = none)")
     distributed.add_arguments(p_tr)

@@ -184,18 +184,25 @@ def main(argv=None) -> int:
                          f"(default {DEFAULT_OBJECTS})")
     ap.add_argument("--poses", type=count, default=8)
     ap.add_argument("--trials", type=count, default=16)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=validate.int_in(0, 2**31 - 1), default=0)
     ap.add_argument("--threads", type=count, default=None,
                     help="native threads (default: all cores)")
     ap.add_argument("--out", default=None, help="JSON file to write")
     args = ap.parse_args(argv)
+    try:  # --out and the object names before any work
+        validate.out_file(args.out, "--out")
+        names = _object_list(validate.comma_list(args.objects, "--objects") and args.objects)
+        from sern_jax.grasp.world import objects as objects_lib
 
-    from sern_jax.grasp.world import objects as objects_lib
+        for name in names:
+            objects_lib.resolve_object(name)
+    except ValueError as exc:
+        ap.error(f"--objects: {exc}" if "--" not in str(exc) else str(exc))
 
     pipeline = _pipeline()
     results = []
     t0 = time.perf_counter()
-    for name in _object_list(args.objects):
+    for name in names:
         spec = objects_lib.make_object(name)
         r = measure_object(spec, args.poses, args.trials, args.seed, args.threads,
                            pipeline)

@@ -44,6 +44,10 @@ def main(argv=None) -> int:
     parser.add_argument("--core-k", type=count, default=172)
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
+    try:  # the output directory before any work (nothing is left behind by the check)
+        validate.out_dir(args.out, "--out")
+    except ValueError as exc:
+        parser.error(str(exc))
 
     from sern_jax.infra import io
     from sern_jax.grasp.model import dataset, pretrain

@@ -1,4 +1,4 @@
-"""Scaling of D0 generation on Ray (issue 20): the same objects, 1, 4 and 8 workers.
+"""Scaling of D0 generation on Ray: the same objects, 1, 4 and 8 workers.
 
 D0's unit of work is a shard; here every shard is one object (``objects_per_shard=1``), so
 the workers can be compared on equal work: object i of this run is object i of the default D0
@@ -14,7 +14,7 @@ Two ways to measure, both on a local Ray started before the clock (as a cluster 
 * ``--mode default-d0``: the default D0's size (``--objects 200 --poses 16``, one object per
   shard) with ``--full-workers`` (default 8 and 4) workers, each run over every object, and one
   worker over a systematic sample (every ``--sample-every``-th object, from object 0): the
-  one-worker run of the whole D0 (~30 min) does not fit one device call. The runs go at the
+  one-worker run of the whole D0 (~30 min) is too long for one time-limited job. The runs go at the
   same time, each on a local Ray of its own, every worker pinned to a core of its own (13 of
   the 16 cores for 8 + 4 + 1). The one-worker time of the whole D0 is *estimated* as
 

@@ -219,6 +219,10 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="runs/theory_grasping")
     args = parser.parse_args(argv)
     bad = parser.error
+    try:  # the output directory before any work (nothing is left behind by the check)
+        validate.out_dir(args.out, "--out")
+    except ValueError as exc:
+        bad(str(exc))
     if args.top < 2:
         bad("--top must be >= 2")
     if args.deep_trials < args.trials or args.trials < 2:

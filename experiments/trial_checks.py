@@ -16,12 +16,12 @@ index)``), up to ``--candidates`` valid candidates per pose drawn without replac
 (numpy ``default_rng([seed, object, pose])``), one randomised trial each
 (``sim.sample_noise`` with key ``fold_in(fold_in(key(seed), object index), 1)``): common
 random numbers across settings, so each trial is paired with itself. The first six
-objects use the seeds of the 6 N check (``experiments/results/trial_checks_6N.json``), but
+objects use the seeds of the 6 N check (``experiments/results/trial_checks/trial_checks_6N.json``), but
 their resting poses, and so the grasps, differ from it: the drop that makes a resting pose
 runs with the scene's solver settings, which changed with the grip (20 / 20 Newton
 iterations). Contexts are made with the default scene; only the trials change setting.
 
-    python -m experiments.trial_checks --out experiments/results/trial_checks.json
+    python -m experiments.trial_checks --out experiments/results/trial_checks/trial_checks.json
 """
 
 from __future__ import annotations
@@ -110,13 +110,17 @@ def main(argv=None) -> int:
                     help="comma-separated object names")
     ap.add_argument("--poses", type=count, default=4)
     ap.add_argument("--candidates", type=count, default=16)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=validate.int_in(0, 2**31 - 1), default=0)
     ap.add_argument("--forces", default="6,40",
                     help="grips (newtons per finger) to compare with the default")
     ap.add_argument("--threads", type=count, default=None)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    names = [n for n in args.objects.split(",") if n]
+    try:  # the output file before any work (nothing is left behind by the check)
+        validate.out_file(args.out, "--out")
+        names = validate.comma_list(args.objects, "--objects")
+    except ValueError as exc:
+        ap.error(str(exc))
     try:
         forces = [float(f) for f in args.forces.split(",") if f]
     except ValueError:

@@ -135,14 +135,14 @@ def test_baselines_run_refuses_another_runs_directory_before_writing_meta(tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["meta.json", "run"]
 
     # the same run's checkpoint (the fingerprint the runner computes) is resumed, not refused
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as online_config
 
     specs, theta0 = grid.hard_specs()
     config = grid.online_config(grid.learners(), grid.tuned_values(tmp_path, True),
                                 num_seeds=2, rounds=1, explore=20, regret_trials=0,
                                 regret_grasps=0, backend="native")
     io.save_npz(tmp_path / "run" / "checkpoint.npz", next_round=np.int64(1),
-                fingerprint=np.str_(runner.run_fingerprint(config, specs[:1], theta0)))
+                fingerprint=np.str_(online_config.run_fingerprint(config, specs[:1], theta0)))
 
     def reached(config, specs, run_dir, theta0, progress):
         raise RuntimeError("runner reached")
@@ -159,11 +159,20 @@ def test_worker_env_sets_threads_cache_and_platform(tmp_path, monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=2 "
                                     "intra_op_parallelism_threads=7")
     monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
-    env = distributed.worker_env(distributed.RayConfig(cpus_per_task=3), tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    run_dir = tmp_path / "run"
+    env = distributed.worker_env(distributed.RayConfig(cpus_per_task=3), run_dir)
     assert env["SERN_CPU_THREADS"] == env["OMP_NUM_THREADS"] == "3"
     assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
                                         "intra_op_parallelism_threads=3"]
-    assert env["JAX_COMPILATION_CACHE_DIR"] == str(tmp_path.resolve() / ".jax_cache")
+    # the compilation cache is this user's, outside every run directory: resuming a run
+    # directory from elsewhere never loads compiled code it holds
+    cache = Path(env["JAX_COMPILATION_CACHE_DIR"])
+    assert cache == tmp_path / "cache" / "sern_jax" / "jax" and cache.is_dir()
+    assert cache.stat().st_mode & 0o077 == 0
+    with pytest.raises(ValueError, match="inside the run directory"):
+        distributed.worker_env(distributed.RayConfig(cache_dir=str(run_dir / ".jax_cache")),
+                               run_dir)
     assert env["JAX_PLATFORMS"] == "cpu"
     env = distributed.worker_env(distributed.RayConfig(gpus_per_task=0.5), tmp_path)
     assert "JAX_PLATFORMS" not in env and env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"
@@ -177,241 +186,6 @@ def test_executor_host_workers_honours_the_task_share(monkeypatch):
     assert executor.host_workers() == 3
     monkeypatch.delenv("SERN_CPU_THREADS")
     assert executor.host_workers() == len(os.sched_getaffinity(0))
-
-
-def test_cluster_doc_quotes_the_committed_scaling_runs():
-    """Every figure of docs/CLUSTER.md's D0 table, recomputed from the committed JSON files."""
-    import json
-
-    doc = (ROOT / "docs" / "CLUSTER.md").read_text()
-    results = ROOT / "experiments" / "results" / "ray_scaling"
-    for name in ("d0_weak_pinned_h100host.json", "d0_weak_unpinned_h100host.json"):
-        data = json.loads((results / name).read_text())
-        assert data["shards_identical_across_worker_counts"]
-        assert data["machine"]["cpu_count"] == 16
-        runs = {r["workers"]: r for r in data["runs"]}
-        assert sorted(runs) == [1, 4, 8]
-        for n, r in runs.items():
-            assert r["objects"] == 6 * n and r["poses"] == 16
-            assert r["efficiency"] == pytest.approx(runs[1]["seconds"] / r["seconds"])
-            assert f"{r['seconds']:.1f} s, " in doc, (name, n)
-            assert f"{r['efficiency']:.2f}" in doc, (name, n)
-        assert f"{runs[1]['seconds'] / 6:.1f} s per object" in doc
-        assert f"{runs[8]['objects_per_second']:.2f}" in doc
-        assert "load average of" in doc and f"{data['machine']['load_average_1m']:.1f}" in doc
-    pinned = json.loads((results / "d0_weak_pinned_h100host.json").read_text())["runs"]
-    one = pinned[0]
-    assert one["task_cpu_seconds_sum"] == pytest.approx(one["task_seconds_sum"], rel=0.01)
-    assert f"{one['task_seconds_min_median_max'][1]:.1f} s" in doc
-    assert f"{pinned[2]['task_seconds_min_median_max'][1]:.1f} s" in doc
-    assert f"the tasks themselves {one['task_seconds_sum'] / 6:.1f} s per object" in doc
-
-
-def test_cluster_doc_quotes_the_default_d0_run():
-    """docs/CLUSTER.md's default-size D0 figures (8 and 4 workers over all 200 objects, the
-    one-worker estimate from the sample), recomputed from the committed JSON."""
-    doc = (ROOT / "docs" / "CLUSTER.md").read_text()
-    readme = (ROOT / "README.md").read_text()
-    data = json.loads((ROOT / "experiments" / "results" / "ray_scaling" /
-                       "d0_default_h100host.json").read_text())
-    assert data["mode"] == "default-d0" and not data["oversubscribed"]
-    assert data["machine"]["cpu_count"] == 16 and data["shards_identical_across_runs"]
-    runs = {(r["workers"], r["sample"] is not None): r for r in data["runs"]}
-    assert sorted(runs) == [(1, True), (4, False), (8, False)]
-    one, four, eight = runs[(1, True)], runs[(4, False)], runs[(8, False)]
-    for r in (four, eight):  # the default D0: 200 objects x 16 poses, every object
-        assert r["objects"] == 200 and r["poses"] == 16 and len(r["task_seconds"]) == 200
-        assert r["labelled_grasps"] == eight["labelled_grasps"]
-    assert one["sample"] == list(range(0, 200, 8)) and len(one["task_seconds"]) == 25
-    # T1_est = sum_sample t1 * sum_all t8 / sum_sample t8 (task seconds)
-    t1 = sum(one["task_seconds"].values())
-    t8_all = sum(eight["task_seconds"].values())
-    t8_sample = sum(eight["task_seconds"][n] for n in one["task_seconds"])
-    t1_est = t1 * t8_all / t8_sample
-    assert data["t1_estimate_seconds"] == pytest.approx(t1_est)
-    for r in (four, eight):
-        e = t1_est / (r["workers"] * r["seconds"])
-        assert r["efficiency"] == pytest.approx(e)
-        assert f"{r['seconds']:.1f} s" in doc and f"**{e:.2f}**" in doc, r["workers"]
-        # the other reading: T1 = the 4-worker run's task seconds (every object, measured)
-        low = sum(four["task_seconds"].values()) / (r["workers"] * r["seconds"])
-        assert f"{low:.2f}" in doc
-    assert eight["efficiency"] >= 0.8  # the issue's goal, on this loaded-host estimate only
-    # the T1 at which E(8) would be the goal's 0.80, and how much faster per task that is
-    edge = 0.8 * 8 * eight["seconds"]
-    faster = 100 * (1 - edge / t1_est)
-    flat_doc, flat_readme = " ".join(doc.split()), " ".join(readme.split())
-    assert (f"{faster:.0f} % faster per task (T1 = {edge:.0f} s), E(8) would be 0.80"
-            in flat_doc)
-    # the README quotes this run only as the earlier, loaded-host figure
-    assert (f"loaded-host estimate ({eight['efficiency']:.2f}, the one-worker sample beside "
-            "12 busy workers)" in flat_readme)
-    assert f"4 workers were measured only then ({four['seconds']:.0f} s)" in flat_readme
-    assert "bias of unknown sign" in flat_doc and "loaded-host estimate only" in flat_doc
-    earlier = flat_doc.split("## Earlier: D0 at its default size on a loaded host")[1]
-    earlier = earlier.split("## ")[0]  # that run's own section: its bias has no known sign
-    assert "errs low" not in earlier and "either reading of T1" not in flat_doc
-    assert "not measured side by side" in flat_doc
-    assert f"{t1_est:.0f} s" in doc and f"{t1:.1f} s" in doc and f"{one['seconds']:.1f} s" in doc
-    assert f"{sum(four['task_seconds'].values()):.0f} s" in doc
-    assert f"{eight['labelled_grasps']:,}" in doc
-    before = data["load_average_1m_5m_15m_before_and_after"][0][0]
-    after = data["load_average_1m_5m_15m_before_and_after"][1][0]
-    assert f"{before:.1f}" in doc and f"{after:.1f}" in doc
-
-
-def test_cluster_doc_quotes_the_sampled_d0_run():
-    """docs/CLUSTER.md's and the README's idle-host D0 figures: 8 workers over all 200
-    objects, one worker alone over a seeded random sample, T1 = 200 x the sample's mean task
-    time with a Student-t interval; every figure recomputed here from the per-object task
-    seconds in the committed JSON (not from its summary fields)."""
-    import numpy as np
-
-    from experiments import ray_scaling
-    from sern_jax.analysis import stats
-
-    doc = " ".join((ROOT / "docs" / "CLUSTER.md").read_text().split())
-    readme = " ".join((ROOT / "README.md").read_text().split())
-    data = json.loads((ROOT / "experiments" / "results" / "ray_scaling" /
-                       "d0_sampled_h100host.json").read_text())
-    assert data["mode"] == "d0-sampled" and data["shards_identical_across_runs"]
-    assert data["machine"]["cpu_count"] == 16 and data["env"]["JAX_PLATFORMS"] == "cpu"
-    one, eight = data["runs"]
-    assert (one["workers"], eight["workers"]) == (1, 8)
-    # the sample is the stated rule applied to the stated seed: uniform, without replacement
-    seed, n = data["sample_seed"], data["sample_size"]
-    sample = sorted(int(i) for i in np.random.default_rng(seed).choice(200, n, replace=False))
-    assert one["sample"] == sample and len(one["task_seconds"]) == n == 24
-    assert f"default_rng({seed})" in doc and f"sample of {n} of the 200 objects" in doc
-    assert ", ".join(map(str, sample)) in doc
-    assert eight["objects"] == 200 and len(eight["task_seconds"]) == 200
-    assert eight["labelled_grasps"] == 204_360 and f"{eight['labelled_grasps']:,}" in doc
-    assert set(one["task_seconds"]) < set(eight["task_seconds"])
-    # T1 = 200 x mean of the sample's task seconds, Student t (n - 1 dof) over the objects
-    t1 = np.array([one["task_seconds"][k] for k in sorted(one["task_seconds"])])
-    ci = stats.t_interval(t1, 0.95)
-    t1_est, lo, hi = 200 * ci.mean, 200 * ci.lower, 200 * ci.upper
-    assert data["t1_estimate_seconds"] == pytest.approx(t1_est)
-    assert data["t1_estimate_interval"] == pytest.approx([lo, hi])
-    t8 = eight["seconds"]
-    e, e_lo, e_hi = (x / (8 * t8) for x in (t1_est, lo, hi))
-    assert eight["efficiency"] == pytest.approx(e)
-    assert e_lo >= 0.8  # the issue's goal, at the interval's lower end
-    quoted = f"E(8) = {e:.2f} [{e_lo:.2f}, {e_hi:.2f}]"
-    assert f"**{quoted}**" in readme
-    assert f"**E(8) = {e:.2f}, 95 % interval [{e_lo:.2f}, {e_hi:.2f}]**" in doc
-    assert f"(8 × {t8:.1f} s) = {e:.2f} [{e_lo:.2f}, {e_hi:.2f}]" in doc
-    for text in (doc, readme):
-        assert f"{t1_est:.0f} s [{lo:.0f}, {hi:.0f}]" in text
-    assert f"200 × {ci.mean:.2f} s (SD {ci.sd:.2f} s over {n} objects)" in doc
-    assert f"8 workers {t8:.1f} s" in readme and f"**{t8:.1f} s**" in doc
-    assert f"{one['seconds']:.1f} s" in doc and f"{one['task_seconds_sum']:.1f} s" in doc
-    assert f"{eight['task_seconds_sum']:.1f} s" in doc
-    assert f"{one['seconds'] - one['task_seconds_sum']:.1f} s" in doc
-    # the ratio estimate (Cochran): R = sum t1 / sum t8 over the sample, residual sd
-    t8s = np.array([eight["task_seconds"][k] for k in sorted(one["task_seconds"])])
-    ratio = t1.sum() / t8s.sum()
-    est = ratio * sum(eight["task_seconds"].values())
-    half = 200 * stats.t_half_width(np.std(t1 - ratio * t8s, ddof=1), n, 0.95)
-    assert data["t1_ratio_estimate_seconds"] == pytest.approx(est)
-    r_e = [x / (8 * t8) for x in (est, est - half, est + half)]
-    assert (f"T1 = {est:.0f} s [{est - half:.0f}, {est + half:.0f}], E(8) = {r_e[0]:.2f} "
-            f"[{r_e[1]:.2f}, {r_e[2]:.2f}]") in doc
-    assert f"ratio estimate {r_e[0]:.2f} [{r_e[1]:.2f}, {r_e[2]:.2f}]" in readme
-    slow = stats.t_interval(t8s / t1, 0.95)
-    slow_q = f"{slow.mean:.3f} [{slow.lower:.3f}, {slow.upper:.3f}]"
-    assert slow_q in doc and slow_q in readme
-    assert slow.lower < 1 < slow.upper  # "no slowdown resolved" is what the doc says
-    assert "no slowdown from running eight at once is resolved" in doc
-    busy = eight["task_seconds_sum"] / (8 * t8)
-    assert f"= {busy:.2f} of the wall time" in doc
-    # the sample drew heavier objects than average (eight-worker task times): why the ratio
-    # estimate is the better-centred figure
-    heavy, mean_all = t8s.mean(), np.mean(list(eight["task_seconds"].values()))
-    assert heavy > mean_all
-    assert (f"took {heavy:.2f} s each on average against {mean_all:.2f} s for all 200 "
-            f"(+{100 * (heavy / mean_all - 1):.1f} %)") in doc
-    # load and CPU time as quoted; one thread per core (lscpu in the context file)
-    for r in (one, eight):
-        assert f"{r['load_average_before'][0]:.2f} → {r['load_average_after'][0]:.2f}" in doc
-        assert r["task_cpu_seconds_sum"] == pytest.approx(r["task_seconds_sum"], rel=0.002)
-        assert f"{r['task_cpu_seconds_sum']:.1f} of {r['task_seconds_sum']:.1f} s" in doc
-    context = (ROOT / "experiments" / "results" / "ray_scaling" /
-               "d0_sampled_h100host_context.txt").read_text()
-    assert "Thread(s) per core:                      1" in context
-    assert "load average: 0.15" in context and "load average 0.15" in doc
-    # the command's own estimator agrees with these recomputations
-    again = ray_scaling.sampled_estimate(one["task_seconds"], eight["task_seconds"], 200)
-    assert again["t1_estimate_interval"] == pytest.approx([lo, hi])
-    assert again["full_over_one_task_ratio_interval"] == pytest.approx(
-        [slow.lower, slow.upper])
-
-
-def test_readme_quotes_the_one_command_strong_run(tmp_path):
-    """The README's one-command strong-setting figures (issue 20's 4-minute goal, not met),
-    recomputed from experiments/results/strong/single_command_h100/, and its comparison with
-    the committed three-part run (round 0 equal in every cell, later rounds drifting)."""
-    import shutil
-
-    from experiments import grasp_learning as gl
-
-    readme = " ".join((ROOT / "README.md").read_text().split())
-    folder = ROOT / "experiments" / "results" / "strong" / "single_command_h100"
-    timing = json.loads((folder / "timing.json").read_text())
-    run = json.loads((folder / "strong.json").read_text())
-    assert timing["exit_code"] == 0 and run["seeds"] == 20 and run["rounds_done"] == 5
-    assert run["machine"]["cpu_count"] == 16 and run["machine"]["jax_backend"] == "gpu"
-    assert "--only" not in run["command"] and " strong --seeds 20" in run["command"]
-    wall = timing["wall_seconds_command"]
-    assert wall > 240 and "**over the 4-minute goal**" in readme
-    m, sec = divmod(round(wall), 60)
-    assert (f"**{wall:.0f} s** for the command ({m} min {sec} s; {run['seconds']:.0f} s in "
-            "the run") in readme
-    t = run["timings"]
-    for quoted in (f"trials {t['trials']:.0f} s", f"evaluation {t['evaluate']:.0f} s",
-                   f"contexts {t['contexts']:.0f} s", f"choosing {t['choose']:.0f} s",
-                   f"updates {t['update']:.0f} s",
-                   (f"{run['trial_counts']['simulated']:,} trials simulated for "
-                    f"{run['trial_counts']['requested']:,} policy grasps"),
-                   (f"{run['trial_counts']['simulated']:,} trials in the "
-                    f"{t['trials'] + t['evaluate']:.0f} s of trials and evaluation"),
-                   f"the contexts cost {t['contexts']:.0f} s"):
-        assert quoted in readme, quoted
-    # against the three-part run: load_results joins the parts along the object axis
-    (tmp_path / "one").mkdir()
-    shutil.copy(folder / "strong.json", tmp_path / "one" / "strong.json")
-    parts = gl.load_results(ROOT / "experiments" / "results" / "strong")["strong"]
-    one = gl.load_results(tmp_path / "one")["strong"]
-    assert np.asarray(parts["lowvar_eval"]).shape == np.asarray(one["lowvar_eval"]).shape
-    cells = np.asarray(one["lowvar_eval"])[0].size
-    for field in ("lowvar_eval", "paper_eval", "explore_success"):
-        a, b = np.asarray(parts[field]), np.asarray(one[field])
-        assert np.array_equal(a[0], b[0], equal_nan=True), field  # round 0: every cell
-    a, b = np.asarray(parts["lowvar_eval"]), np.asarray(one["lowvar_eval"])
-    differ = [int((~np.isclose(a[r], b[r], equal_nan=True)).sum()) for r in range(a.shape[0])]
-    assert differ[0] == 0
-    assert (f"equal the three-part run's in all {cells} (object, policy, seed) cells" in readme)
-    assert (f"{differ[1]} of {cells} cells differ at round 1, {differ[-1]} at round 5"
-            in readme)
-
-
-def test_cluster_doc_quotes_the_seed_subset_measurement():
-    """docs/CLUSTER.md's reason for keeping object units: subsets of >= 2 seeds equal the
-    full run bit for bit, one seed alone does not; figures from the committed report."""
-    doc = " ".join((ROOT / "docs" / "CLUSTER.md").read_text().split())
-    rep = json.loads((ROOT / "experiments" / "results" / "ray_scaling" /
-                      "seed_subset_cpu.json").read_text())["subsets"]
-    for subset in ("(1, 3)", "(0, 1, 2)"):
-        assert all(rep[subset]["results_equal"].values())
-        assert all(st["leaves_equal"] == st["leaves"] for st in rep[subset]["states"])
-    one = rep["(2,)"]
-    assert all(one["results_equal"].values())
-    differ = sorted(st["leaves"] - st["leaves_equal"] for st in one["states"])
-    worst = max(st["max_abs_diff"] for st in one["states"])
-    assert differ[0] > 0 and f"{differ[0]} to {differ[-1]} of each learner's 60" in doc
-    assert {st["leaves"] for st in one["states"]} == {60}
-    assert f"up to {worst:.1e}".replace("e-07", "e-7") in doc
-    assert "seeds {1, 3} and {0, 1, 2} run alone" in doc and "seed {2} alone" in doc
 
 
 def test_no_cluster_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):
@@ -673,10 +447,10 @@ def _unit_fails_for_box(config, spec, out_dir, theta0) -> None:
 def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
     """A learn unit whose worker process is killed (SIGKILL) right after the box's round-1
     checkpoint, on the first attempt; Ray's retry resumes the unit from that checkpoint."""
-    from sern_jax.grasp.online import learn_units, runner
+    from sern_jax.grasp.online import checkpoint, learn_units
 
     marker = Path(out_dir).parent.parent / f"{spec.name}.killed"
-    real = runner._save
+    real = checkpoint.save
 
     def save(path, fingerprint, results, rewards, next_round):
         real(path, fingerprint, results, rewards, next_round)
@@ -684,11 +458,11 @@ def _unit_killed_after_round_1(config, spec, out_dir, theta0) -> None:
             marker.write_text("killed once after round 1")
             os.kill(os.getpid(), signal.SIGKILL)
 
-    runner._save = save
+    checkpoint.save = save
     try:
         learn_units.run_unit(config, spec, out_dir, theta0)
     finally:
-        runner._save = real
+        checkpoint.save = real
 
 
 def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch):
@@ -760,14 +534,14 @@ def test_learn_on_ray_stops_on_a_failing_unit_resumes_and_continues_a_serial_run
 
     # a run left part-way without --ray (its checkpoint after round 1) continues on Ray:
     # split into units at round 2, each replays round 1 and runs round 2
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import checkpoint
 
     saved = _arrays(one / "checkpoint.npz")
-    results = runner.RoundResults(*(saved[f] for f in runner.RoundResults._fields))
-    results, rewards = runner._through(results, saved["explore_reward"], 2)
+    results = checkpoint.RoundResults(*(saved[f] for f in checkpoint.RoundResults._fields))
+    results, rewards = checkpoint.through(results, saved["explore_reward"], 2)
     part = tmp_path / "part"
     part.mkdir()
-    runner._save(part / "checkpoint.npz", str(saved["fingerprint"]), results, rewards, 2)
+    checkpoint.save(part / "checkpoint.npz", str(saved["fingerprint"]), results, rewards, 2)
     assert main(LEARN + ["--ray", "--out", str(part)]) == 0
     assert "Ray: 2 objects" in capsys.readouterr().out
     _assert_same_arrays(single, _learn_arrays(part))
@@ -846,10 +620,10 @@ def test_failing_unit_stops_the_run_in_one_line_and_keeps_finished_units(local_r
 
 def test_failing_unit_through_the_command_is_exit_1_one_line(local_ray, tmp_path, capsys,
                                                              monkeypatch):
-    from sern_jax.commands.scripts import script_module
+    from sern_jax.experiment import regret
 
     # the units point at a function that raises (it travels by value, from this module)
-    monkeypatch.setattr(script_module("experiments", "regret"), "compute_chunk",
+    monkeypatch.setattr(regret, "compute_chunk",
                         _unit_fails_any)
     out = tmp_path / "r"
     assert main(TINY + ["--ray", "--out", str(out)]) == 1

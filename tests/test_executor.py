@@ -1,5 +1,6 @@
-"""The executor: planning, runner choice, chunking, pinned-host copies, sharding, memory, and
-the import graph of the core (no circle, no script folders)."""
+"""The seed driver and its plan: runner choice, chunking, pinned-host copies, sharding,
+memory, one validation per call, and the import graph of the library's layers (the core
+imports no other layer; no circle)."""
 
 import ast
 import dataclasses
@@ -15,9 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax.engine import drive as executor
 from sern_jax.core import problems
+from sern_jax.engine import drive as executor
+from sern_jax.engine import plan as plan_lib
 from sern_jax.engine import simulate as sim
+from sern_jax.engine import summary
 
 CFG = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=5, horizon=300,
                     num_checkpoints=12)
@@ -70,6 +73,25 @@ def test_run_seeds_dispatches_to_the_exact_fast_runner():
         executor.run_seeds(CFG, params, num_seeds=4, first_seed=-1)
 
 
+def test_a_call_validates_once_and_computes_its_grid_once(monkeypatch):
+    # One plan per call: once the call's runner is built (and cached), a run_seeds call
+    # validates its config once and computes its checkpoint grid once, on every path.
+    calls = {"validate": 0, "checkpoint_times": 0}
+    for name in calls:
+        def counted(*args, _original=getattr(sim, name), _name=name, **kwargs):
+            calls[_name] += 1
+            return _original(*args, **kwargs)
+        monkeypatch.setattr(sim, name, counted)
+    thompson = dataclasses.replace(CFG, policy="thompson", estimator="mean")
+    for cfg, runner, summary in ((CFG, "fast", False), (CFG, "general", False),
+                                 (CFG, "auto", True), (thompson, "auto", False)):
+        p = sim.default_params(cfg, PROB, alpha0=0.1)
+        executor.run_seeds(cfg, p, num_seeds=8, runner=runner, summary=summary)
+        calls.update(validate=0, checkpoint_times=0)
+        executor.run_seeds(cfg, p, num_seeds=8, runner=runner, summary=summary)
+        assert calls == {"validate": 1, "checkpoint_times": 1}, (cfg.policy, runner, summary)
+
+
 def test_fast_and_general_runners_agree_through_run_seeds_float64():
     with jax.enable_x64():
         cfg = dataclasses.replace(CFG, dtype="float64")
@@ -88,7 +110,7 @@ def test_pinned_host_transfer_gives_the_same_outputs(monkeypatch):
     assert not executor.use_pinned_host(None)  # CPU: outputs are already host memory
     params = sim.default_params(CFG, PROB, alpha0=0.1)
     plain = [executor.run_seeds(CFG, params, seed=5, num_seeds=24, chunk_size=c) for c in (None, 10)]
-    monkeypatch.setattr(executor, "use_pinned_host", lambda mesh: True)
+    monkeypatch.setattr(plan_lib, "use_pinned_host", lambda mesh: True)
     pinned = [executor.run_seeds(CFG, params, seed=5, num_seeds=24, chunk_size=c) for c in (None, 10)]
     for a, b in zip(plain, pinned):
         for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
@@ -114,7 +136,8 @@ def test_default_chunk_size_bounds_one_call():
 
 SHARD_SCRIPT = textwrap.dedent("""
     import json, numpy as np, jax
-    from sern_jax import executor, problems, simulate as sim
+    from sern_jax.core import problems
+    from sern_jax.engine import drive as executor, plan, simulate as sim
     cfg = sim.RunConfig(num_arms=6, horizon=200, num_checkpoints=8)
     prob = problems.bernoulli([0.1, 0.3, 0.5, 0.6, 0.7, 0.75])
     params = sim.default_params(cfg, prob, alpha0=0.1)
@@ -122,7 +145,7 @@ SHARD_SCRIPT = textwrap.dedent("""
     mesh = seed_mesh(4)
     sharded = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh)
     plain = executor.run_seeds(cfg, params, seed=3, num_seeds=103)
-    executor.use_pinned_host = lambda mesh: True  # the accelerator transfer path, on the CPU mesh
+    plan.use_pinned_host = lambda mesh: True  # the accelerator transfer path, on the CPU mesh
     pinned = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40)
     summ = executor.run_seeds(cfg, params, seed=3, num_seeds=103, mesh=mesh, chunk_size=40,
                               summary=True)  # reduced on the mesh, merged over 3 calls
@@ -154,7 +177,9 @@ def test_sharded_equals_unsharded():
 
 MEM_SCRIPT = textwrap.dedent("""
     import json, sys
-    from sern_jax import executor, io, problems, simulate as sim
+    from sern_jax.core import problems
+    from sern_jax.engine import drive as executor, simulate as sim
+    from sern_jax.infra import io
     horizon = int(sys.argv[1])
     cfg = sim.RunConfig(num_arms=64, horizon=horizon, num_checkpoints=40, random_means=True)
     params = sim.default_params(cfg, problems.bernoulli([0.5] * 64), alpha0=0.05)
@@ -187,42 +212,89 @@ def test_memory_full_size():
 # ----------------------------------------------------------------------------- import graph
 
 ROOT = Path(__file__).resolve().parents[1]
-CORE = sorted(p.stem for p in (ROOT / "sern_jax").glob("*.py") if p.stem != "__init__")
 SCRIPT_FOLDERS = ("experiments", "figures", "proofs_check")
-NEURAL_LAYER = ("networks",)  # the core modules that may import flax
+# What each layer of sern_jax may import besides itself (DESIGN.md: the folder tree is the
+# architecture). The core: jax, numpy, optax and scipy only, no other layer.
+LAYERS = {
+    "core": set(),
+    "infra": {"core"},
+    "analysis": {"core"},
+    "learners": {"core"},
+    "engine": {"core", "learners", "infra"},
+    "grasp": {"core", "analysis", "learners", "engine", "infra"},
+    "experiment": {"core", "analysis", "learners", "engine", "infra"},
+    "bench": {"core", "analysis", "learners", "engine", "grasp", "infra"},
+}
+CORE_LIBRARIES = {"jax", "numpy", "optax", "scipy"}
+FLAX_MODULES = ("sern_jax.engine.networks",)  # the neural layer; grasp/ may use flax too
+
+
+def _modules() -> dict[str, Path]:
+    """Every module of the package by dotted name (a package by its folder's name)."""
+    out = {}
+    for path in (ROOT / "sern_jax").rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
 
 
 def _imports(module: str) -> set[str]:
-    """Every module ``sern_jax/<module>.py`` imports, at any depth (function-level too)."""
-    tree = ast.parse((ROOT / "sern_jax" / f"{module}.py").read_text())
+    """Every module ``module`` imports, at any depth (function-level too); ``from p import
+    n`` counts as p and, where it is a module, p.n."""
+    tree = ast.parse(MODULES[module].read_text())
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             names.add(node.module)
-            if node.module == "sern_jax":  # from sern_jax import simulate, ...
-                names.update(f"sern_jax.{a.name}" for a in node.names)
+            names.update(f"{node.module}.{a.name}" for a in node.names
+                         if f"{node.module}.{a.name}" in MODULES)
     return names
 
 
-def test_core_import_graph_has_no_cycle_and_no_script_folders():
-    graph = {}
-    for module in CORE:
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def test_each_layer_imports_only_the_layers_below_it():
+    assert {_layer(m) for m in MODULES} - {None} == set(LAYERS) | {"commands"}
+    for module in MODULES:
+        layer = _layer(module)
         deps = _imports(module)
-        graph[module] = {d.split(".")[1] for d in deps
-                         if d.startswith("sern_jax.") and d.split(".")[1] in CORE}
         tops = {d.split(".")[0] for d in deps}
-        # only the command modules (sern_jax/commands/) wire the script folders
-        assert not tops & set(SCRIPT_FOLDERS), (module, tops & set(SCRIPT_FOLDERS))
-        assert "mujoco" not in tops, module
-        # flax only in the neural layer (DESIGN.md: networks for the synthetic problems)
-        assert "flax" not in tops or module in NEURAL_LAYER, module
-        assert not any(d.startswith(("sern_jax.grasp", "sern_jax.commands")) for d in deps), module
-    assert graph["executor"] >= {"simulate", "fast_softmax"}
-    assert not graph["simulate"] & {"executor", "fast_softmax"}
-    assert "executor" not in graph["fast_softmax"]
-    # depth-first search for a cycle
+        assert not tops & set(SCRIPT_FOLDERS) or layer == "commands", module
+        assert "mujoco" not in tops or layer == "grasp", module
+        assert "flax" not in tops or layer == "grasp" or module in FLAX_MODULES, module
+        if layer in (None, "commands"):
+            continue
+        used = {_layer(d) for d in deps if d.startswith("sern_jax.")} - {None, layer}
+        assert used <= LAYERS[layer], (module, used - LAYERS[layer])
+        if layer == "core":
+            third_party = tops - set(sys.stdlib_module_names) - {"sern_jax"}
+            assert third_party <= CORE_LIBRARIES, (module, third_party - CORE_LIBRARIES)
+
+
+def test_engine_modules_import_down_the_one_driver():
+    # the seed driver runs plans; the plan, the summaries and the runners never import it
+    assert {"sern_jax.engine.plan", "sern_jax.engine.summary"} <= _imports("sern_jax.engine.drive")
+    assert "sern_jax.engine.drive" in _imports("sern_jax.engine.neural")
+    for module in ("plan", "summary", "simulate", "fast_softmax", "fast_thompson"):
+        assert "sern_jax.engine.drive" not in _imports(f"sern_jax.engine.{module}"), module
+    assert not _imports("sern_jax.engine.simulate") & {
+        f"sern_jax.engine.{m}" for m in ("plan", "summary", "fast_softmax", "fast_thompson")}
+
+
+def test_import_graph_has_no_cycle():
+    graph = {m: {d for d in _imports(m) if d in MODULES and d != m} for m in MODULES}
+    # ``import sern_jax`` loads its layers lazily; its names for type checkers are no edges
+    graph["sern_jax"] = set()
     state = {}
 
     def visit(node, path):
@@ -234,35 +306,36 @@ def test_core_import_graph_has_no_cycle_and_no_script_folders():
             visit(dep, path + [node])
         state[node] = "done"
 
-    for module in CORE:
+    for module in sorted(graph):
         visit(module, [])
 
 
-def test_each_core_module_imports_alone_in_a_fresh_interpreter():
+def test_each_engine_and_core_module_imports_alone_in_a_fresh_interpreter():
     # One interpreter per module: an import that only works after another module was imported
     # first (the symptom of a circle) fails here.
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    for module in ["sern_jax", *(f"sern_jax.{m}" for m in CORE)]:
-        res = subprocess.run([sys.executable, "-c", f"import {module}"], env=env, cwd=ROOT,
+    names = sorted(m for m in MODULES if _layer(m) in ("core", "engine"))
+    script = "import importlib, sys\nfor name in sys.argv[1:]:\n    importlib.import_module(name)"
+    for module in ["sern_jax", *names]:
+        res = subprocess.run([sys.executable, "-c", script, module], env=env, cwd=ROOT,
                              capture_output=True, text=True, timeout=300)
         assert res.returncode == 0, (module, res.stderr[-2000:])
 
 
-def test_package_reexports_core_modules_lazily():
+def test_package_loads_its_layers_lazily():
     script = textwrap.dedent("""
         import sys, sern_jax
         assert not {"jax", "mujoco", "flax"} & set(sys.modules), "import sern_jax is not lazy"
-        for name in sern_jax.__all__[1:]:
-            module = getattr(sern_jax, name)
+        from sern_jax.engine import drive, summary
+        for module in (drive, summary):
             missing = [n for n in module.__all__ if not hasattr(module, n)]
-            assert not missing, (name, missing)
+            assert not missing, missing
         assert sern_jax.engine.drive.run_seeds
-        assert not {"mujoco", "flax"} & set(sys.modules), "a core module imported mujoco/flax"
+        assert not {"mujoco", "flax"} & set(sys.modules), "the engine imported mujoco/flax"
     """)
     res = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
                          text=True, timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
     assert res.returncode == 0, res.stderr[-2000:]
-    assert set(CORE) >= set(__import__("sern_jax").__all__[1:])
 
 
 def test_summary_integer_paths_equal_the_float_paths():
@@ -271,16 +344,16 @@ def test_summary_integer_paths_equal_the_float_paths():
     # replace: the table equals _bin_index on every integer 0..T, and the block sums (forced
     # small here, with padding and masked seeds) equal the compensated float sum.
     config = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=4, horizon=3000)
-    edges = executor.summary_edges(config)["counts"]  # [G, 65]
-    table = executor._bin_table(edges)
+    edges = summary.summary_edges(config)["counts"]  # [G, 65]
+    table = summary._bin_table(edges)
     num_g = edges.shape[0]
     values = jnp.broadcast_to(jnp.arange(3001, dtype=jnp.float32)[:, None, None], (3001, num_g, 1))
-    ref = executor._bin_index(values, jnp.asarray(edges, jnp.float32), jnp.float32)
+    ref = summary._bin_index(values, jnp.asarray(edges, jnp.float32), jnp.float32)
     np.testing.assert_array_equal(table.T, np.asarray(ref)[:, :, 0])
     x = jax.random.randint(jax.random.key(3), (37, 5, 4), 0, 3001, jnp.int32)
     valid = jnp.arange(37) < 33
-    want = executor.compensated_sum(jnp.where(valid[:, None, None], x, 0).astype(jnp.float32))
+    want = summary.compensated_sum(jnp.where(valid[:, None, None], x, 0).astype(jnp.float32))
     for top in (3000, 2**31 // 7, 2**30):  # blocks of all seeds, 7 seeds, 1 seed
-        got = executor._int_field_sum(x, valid, top, jnp.float32)
+        got = summary._int_field_sum(x, valid, top, jnp.float32)
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
     assert np.asarray(want).sum() == int(jnp.sum(jnp.where(valid[:, None, None], x, 0)))

@@ -7,9 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sern_jax.engine import drive as executor
 from sern_jax.core import problems
+from sern_jax.engine import drive as executor
 from sern_jax.engine import simulate as sim
+from sern_jax.engine import summary as summary_lib
 
 CFG = sim.RunConfig(num_arms=6, horizon=300, num_checkpoints=8, random_means=True)
 PARAMS = sim.default_params(CFG, problems.bernoulli([0.5] * 6), alpha0=0.1)
@@ -28,7 +29,7 @@ def summary():
 
 def test_summary_equals_numpy_reduction_of_per_seed_arrays(per_seed, summary):
     assert summary.num_seeds == NUM
-    for field in executor.SUMMARY_FIELDS:
+    for field in summary_lib.SUMMARY_FIELDS:
         x = getattr(per_seed, field)
         s = getattr(summary, field)
         x64 = x.astype(np.float64)
@@ -44,7 +45,7 @@ def test_summary_equals_numpy_reduction_of_per_seed_arrays(per_seed, summary):
         assert s.hist.sum(-1).min() == s.hist.sum(-1).max() == NUM
         widths = np.diff(s.edges, axis=-1).max(-1)  # [G] widest bin per checkpoint
         widths = widths.reshape(widths.shape + (1,) * (x.ndim - 2))
-        for q in executor.SUMMARY_QUANTILES:
+        for q in summary_lib.SUMMARY_QUANTILES:
             exact = np.quantile(x, q, axis=0, method="inverted_cdf")
             got = getattr(summary, field).quantile(q)
             assert np.all(got.lo <= exact) and np.all(exact <= got.hi), (field, q)
@@ -64,7 +65,7 @@ def test_quantile_bracket_control_fails_on_shifted_values(per_seed, summary):
 
 def test_chunk_merge_equals_one_chunk(summary):
     one = executor.run_seeds(CFG, PARAMS, seed=5, num_seeds=NUM, chunk_size=NUM, summary=True)
-    for field in executor.SUMMARY_FIELDS:
+    for field in summary_lib.SUMMARY_FIELDS:
         a, b = getattr(one, field), getattr(summary, field)
         scale = 1.0 + np.abs(a.max).max()
         np.testing.assert_allclose(a.mean, b.mean, rtol=1e-6, atol=1e-6 * scale)
@@ -81,7 +82,7 @@ def test_seed_count_independence(summary):
     head = executor.run_seeds(CFG, PARAMS, seed=5, num_seeds=40, chunk_size=64, summary=True)
     tail = executor.run_seeds(CFG, PARAMS, seed=5, num_seeds=NUM - 40, first_seed=40,
                               chunk_size=64, summary=True)
-    merged = executor.merge_summaries([head, tail])
+    merged = summary_lib.merge_summaries([head, tail])
     assert head.num_seeds == 40 and merged.num_seeds == NUM
     np.testing.assert_array_equal(merged.counts.hist, summary.counts.hist)
     np.testing.assert_array_equal(merged.regret_rb.min, summary.regret_rb.min)
@@ -92,7 +93,7 @@ def test_seed_count_independence(summary):
 
 
 def test_summary_arrays_round_trip(summary):
-    back = executor.summary_from_arrays(executor.summary_arrays(summary, "p__"), "p__")
+    back = summary_lib.summary_from_arrays(summary_lib.summary_arrays(summary, "p__"), "p__")
     for a, b in zip(back, summary):
         assert a.count == b.count
         np.testing.assert_array_equal(a.mean, b.mean)
@@ -106,7 +107,7 @@ def test_compensated_sum_keeps_what_a_float32_sum_loses():
     for v in x:  # sequential float32: every +1 rounds back to 2^24
         naive = np.float32(naive + v)
     assert float(naive) == 2.0**24  # the control fails
-    assert float(jax.jit(executor.compensated_sum)(jnp.asarray(x))) == exact
+    assert float(jax.jit(summary_lib.compensated_sum)(jnp.asarray(x))) == exact
     y = jnp.full((2**20 + 3,), 1e-3, jnp.float32)
-    got = float(jax.jit(executor.compensated_sum)(y))
+    got = float(jax.jit(summary_lib.compensated_sum)(y))
     assert abs(got - (2**20 + 3) * float(np.float32(1e-3))) <= 1e-6 * got

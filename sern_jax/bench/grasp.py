@@ -12,7 +12,7 @@
   ``context_poses`` poses per call (different poses each call, one shared scene);
 * a time split per stage (first context incl. compiles, depth per image, candidates per set,
   one context, one trial per backend), and the quality network's rates
-  (``quality_net.benchmark``).
+  (:func:`quality_net_benchmark`).
 
 :func:`measure_agreement` is the paired native-vs-MJX agreement of trial outcomes. Every figure
 is measured in the call on this machine (``machine``: :func:`sern_jax.infra.io.machine`); timings
@@ -28,7 +28,8 @@ from typing import Callable
 
 from sern_jax.infra import io, timing
 
-__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "random_grasps"]
+__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "quality_net_benchmark",
+           "random_grasps"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,12 +244,98 @@ def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
     if cfg.quality_sets > 0:
         # The quality network beside the simulator in the same run: 64-candidate sets
         # scored per second (crops + network, batched) and Adam steps per second.
-        from sern_jax.grasp.model import quality_net
-
-        qn = quality_net.benchmark(num_sets=cfg.quality_sets,
-                                   batch_size=cfg.quality_batch)
+        qn = quality_net_benchmark(num_sets=cfg.quality_sets, batch_size=cfg.quality_batch)
         out["quality_net"] = qn
         log(f"quality net: {qn['sets_scored_per_s']:.0f} sets of 64 scored/s, "
             f"{qn['train_steps_per_s']:.0f} train steps/s (batch {cfg.quality_batch})")
     out["stages"] = stages
     return out
+
+
+# ----------------------------------------------------------------------------- quality network
+
+
+def _synthetic_sets(num_sets: int, num_candidates: int, size: int = 96):
+    """Depth images of a box on a table and random candidates (host side, fixed seed)."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    images = np.full((num_sets, size, size), 0.6, np.float32)
+    images[:, 30:66, 38:58] = 0.55
+    center = rng.uniform(20, size - 20, (num_sets, num_candidates, 2)).astype(np.float32)
+    angle = rng.uniform(-np.pi / 2, np.pi / 2, (num_sets, num_candidates))
+    gdepth = rng.uniform(0.56, 0.59, (num_sets, num_candidates))
+    return images, (center, angle.astype(np.float32), gdepth.astype(np.float32))
+
+
+def quality_net_benchmark(config=None, num_sets: int = 16, batch_size: int = 64,
+                          num_candidates: int = 64, min_time: float = 1.0) -> dict:
+    """Measures the quality network's scoring and training rates on this machine (jitted,
+    after compiling).
+
+    Scoring: ``num_sets`` 96x96 depth images x ``num_candidates`` candidates per call,
+    crops (``crops.extract_batch``) + network, one jitted call. Training: one Adam step
+    (``quality_net.make_train_step``, BCE) on a minibatch of ``batch_size`` crops.
+
+    Args:
+      config: the network's ``QualityNetConfig`` (None: the default network).
+      num_sets: candidate sets (images) scored per call.
+      batch_size: training minibatch size.
+      num_candidates: candidates per set (K).
+      min_time: seconds spent timing each rate.
+
+    Returns:
+      dict: sets_scored_per_s, grasps_scored_per_s, sets_per_call, num_candidates,
+      train_steps_per_s, train_examples_per_s, train_batch_size, params,
+      flops_per_grasp, gqcnn_params, gqcnn_flops_per_grasp, jax_backend.
+    """
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    import optax
+
+    from sern_jax.grasp.model import quality_net as qn
+    from sern_jax.grasp.world import crops as crops_lib
+
+    config = qn.QualityNetConfig() if config is None else config
+    net = qn.make_quality_network(config)
+    params = net.init(jax.random.key(0))
+    crop_config = crops_lib.CropConfig(crop_size=config.crop_size)
+    images, cands = _synthetic_sets(num_sets, num_candidates)
+
+    @jax.jit
+    def score(params, images, cands):
+        c = crops_lib.extract_batch(images, cands, crop_config)
+        return net.apply(params, c.image, c.depth)
+
+    args = (params, jnp.asarray(images), jax.tree.map(jnp.asarray, cands))
+    t_score = timing.time_calls(lambda: score(*args), repeats=3, min_calls=3,
+                                min_time=min_time / 3).median_s
+
+    optimizer = optax.adam(1e-3)
+    step = jax.jit(qn.make_train_step(net, optimizer))
+    crops0 = crops_lib.extract_batch(*args[1:], crop_config)
+    rows = np.arange(batch_size) % (num_sets * num_candidates)
+    batch = qn.TrainData(
+        crops0.image.reshape(-1, config.crop_size, config.crop_size)[rows],
+        crops0.depth.reshape(-1)[rows],
+        jnp.asarray(rows % 2, jnp.float32),
+        jnp.ones((batch_size,), jnp.float32),
+    )
+    opt_state = qn.init_opt_state(optimizer, params)
+    t_step = timing.time_calls(lambda: step(params, opt_state, batch)[2], repeats=3,
+                               min_calls=3, min_time=min_time / 3).median_s
+    return {
+        "sets_scored_per_s": num_sets / t_score,
+        "grasps_scored_per_s": num_sets * num_candidates / t_score,
+        "sets_per_call": num_sets,
+        "num_candidates": num_candidates,
+        "train_steps_per_s": 1.0 / t_step,
+        "train_examples_per_s": batch_size / t_step,
+        "train_batch_size": batch_size,
+        "params": qn.param_count(config),
+        "flops_per_grasp": qn.flops_per_grasp(config),
+        "gqcnn_params": qn.param_count(qn.GQCNN_2_0),
+        "gqcnn_flops_per_grasp": qn.flops_per_grasp(qn.GQCNN_2_0),
+        "jax_backend": jax.default_backend(),
+    }

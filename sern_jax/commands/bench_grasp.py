@@ -88,7 +88,7 @@ def _validate(args) -> None:
         _csv_ints(text, flag)
     if not args.native_batch.strip():
         raise ValueError("--native-batch must name at least one batch size")
-    for flag, value, low, high in (("--depth-batch", args.depth_batch, 0, 4096),
+    for flag, value, low, high in (("--depth-batch", args.depth_batch, 1, 4096),
                                    ("--repeats", args.repeats, 1, 1000),
                                    ("--agreement", args.agreement, 0, 100_000),
                                    ("--quality-sets", args.quality_sets, 0, 100_000),
@@ -115,10 +115,10 @@ def _validate(args) -> None:
 
 
 def run(args) -> int:
+    _validate(args)  # before the heavy imports: a bad flag is refused in a second
     from sern_jax.commands.grasp_show import import_mjx_quietly
 
     import_mjx_quietly()
-    _validate(args)
     from sern_jax.bench import grasp as benchmarks
     from sern_jax.grasp.world import objects as objects_lib
 

@@ -13,7 +13,13 @@ import argparse
 import json
 import sys
 
+from sern_jax.infra import validate
+
 __all__ = ["add_parser", "run"]
+
+
+_MAX = 2**24  # seeds, rounds or a chunk per call: far above any useful benchmark size
+_MAX_SEED_ROUNDS = 1e11
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -29,39 +35,46 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--learner", default=d["learner"].default, help="a learner registry name")
-    p.add_argument("--delta", type=float, default=d["delta"].default, help="the wheel's δ")
-    p.add_argument("--seeds", type=int, default=d["num_seeds"].default, help="S")
-    p.add_argument("--horizon", type=int, default=d["horizon"].default, help="T")
-    p.add_argument("--update-every", type=int, default=d["update_every"].default,
+    p.add_argument("--delta", type=validate.float_in(0.0, 1.0, low_open=True, high_open=True),
+                   default=d["delta"].default, help="the wheel's δ, in (0, 1)")
+    p.add_argument("--seeds", type=validate.int_in(1, _MAX), default=d["num_seeds"].default,
+                   help="S")
+    p.add_argument("--horizon", type=validate.int_in(1, _MAX), default=d["horizon"].default,
+                   help="T")
+    p.add_argument("--update-every", type=validate.int_in(1, _MAX),
+                   default=d["update_every"].default,
                    help="rounds between network updates")
     p.add_argument("--hidden", default=",".join(map(str, d["hidden"].default)),
                    help="MLP hidden widths, comma list")
-    p.add_argument("--fit-steps", type=int, default=d["fit_steps"].default,
-                   help="Adam steps per update")
-    p.add_argument("--batch-size", type=int, default=d["batch_size"].default,
-                   help="rows per Adam step")
-    p.add_argument("--repeats", type=int, default=d["repeats"].default,
+    p.add_argument("--fit-steps", type=validate.int_in(1, 100_000),
+                   default=d["fit_steps"].default, help="Adam steps per update")
+    p.add_argument("--batch-size", type=validate.int_in(1, 1_000_000),
+                   default=d["batch_size"].default, help="rows per Adam step")
+    p.add_argument("--repeats", type=validate.int_in(0, 1000), default=d["repeats"].default,
                    help="timed runs of the batched path (median; 0 skips it)")
-    p.add_argument("--loop-seeds", type=int, default=d["loop_seeds"].default,
+    p.add_argument("--loop-seeds", type=validate.int_in(0, 100_000),
+                   default=d["loop_seeds"].default,
                    help="seeds of the Python-loop reference (0 skips it)")
-    p.add_argument("--loop-rounds", type=int, default=d["loop_rounds"].default,
+    p.add_argument("--loop-rounds", type=validate.int_in(1, _MAX),
+                   default=d["loop_rounds"].default,
                    help="rounds per seed of the Python-loop reference")
-    p.add_argument("--chunk-size", type=int, default=None,
+    p.add_argument("--chunk-size", type=validate.int_in(1, _MAX), default=None,
                    help="seeds per compiled call (default: an equal share per core)")
     p.set_defaults(func=run)
     return p
 
 
 def run(args) -> int:
+    hidden = tuple(validate.comma_list_of(args.hidden, "--hidden", int, "integers",
+                                          unique=False))
+    if min(hidden) < 1 or max(hidden) > 4096:
+        raise ValueError(f"--hidden widths must lie in [1, 4096], got {args.hidden!r}")
+    if args.seeds * args.horizon > _MAX_SEED_ROUNDS:
+        raise ValueError(f"--seeds {args.seeds} x --horizon {args.horizon} is over "
+                         f"{_MAX_SEED_ROUNDS:.0e} seed-rounds, beyond any useful benchmark; "
+                         "use fewer")
     from sern_jax.bench import neural as neural_bench
 
-    try:
-        hidden = tuple(int(w) for w in args.hidden.split(",") if w.strip())
-    except ValueError:
-        raise ValueError(f"--hidden must be a comma list of integers, got {args.hidden!r}") \
-            from None
-    if not hidden or min(hidden) < 1:
-        raise ValueError(f"--hidden widths must be >= 1, got {args.hidden!r}")
     config = neural_bench.NeuralBenchConfig(
         learner=args.learner, delta=args.delta, num_seeds=args.seeds, horizon=args.horizon,
         update_every=args.update_every, hidden=hidden, fit_steps=args.fit_steps,

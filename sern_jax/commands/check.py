@@ -8,6 +8,7 @@ harness is broken). Heavy imports (jax, the checks) happen inside ``run``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as _dt
 import sys
 import time
@@ -80,21 +81,78 @@ def run(args) -> int:
             c = registry.get(name)
             print(f"{name:28s} expect {c.expected:5s}  {c.claim}")
         return 0
-    checks = registry.all_checks(args.only)  # ValueError on unknown names, before any compile
+    try:  # unknown names, before any compile
+        checks = registry.all_checks(args.only)
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"--only: {str(exc).strip(chr(39))} (sern check --list names "
+                         "them)") from None
 
-    from tqdm import tqdm
+    from sern_jax.infra import validate
 
-    fw = script_module("proofs_check", "framework")
-    report = script_module("proofs_check", "report")
-    from sern_jax.infra import io
+    with contextlib.ExitStack() as stack:
+        if args.json_out:  # two checks into one --json-out: the second is refused
+            stack.enter_context(_file_lock(args.json_out, "--json-out"))
+        run_dir = stack.enter_context(validate.locked_run_dir(_new_run_dir(args)))
+        (run_dir / "figures").mkdir(exist_ok=True)
+        return _run(args, checks, run_dir, registry)
 
-    name = args.name or ("check-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-                         + ("-quick" if args.quick else ""))
+
+def _new_run_dir(args):
+    """``--out/--name``, or a fresh ``check-<time>[-N]`` that no other run took (made with
+    an exclusive ``mkdir``, so two checks started in the same second never share one)."""
+    from pathlib import Path
+
+    root = Path(args.out)
+    if args.name:
+        return root / args.name
+    name = ("check-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+            + ("-quick" if args.quick else ""))
     try:
-        run_dir = io.make_run_dir(args.out, name)
+        root.mkdir(parents=True, exist_ok=True)
+        for i in range(1, 10_000):
+            path = root / (name if i == 1 else f"{name}-{i}")
+            try:
+                path.mkdir()
+                return path
+            except FileExistsError:
+                continue
     except OSError as exc:
         raise ValueError(f"--out {args.out}: cannot create the run directory "
                          f"({exc.strerror or exc})") from None
+    raise ValueError(f"--out {args.out}: every run directory name {name}-N is taken")
+
+
+@contextlib.contextmanager
+def _file_lock(path, flag: str):
+    """An exclusive ``flock`` on ``.<name>.lock`` beside ``path`` while the block runs; one
+    line naming ``flag`` when another process holds it (its report would be lost)."""
+    import fcntl
+    import os
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lock = path.parent / f".{path.name}.lock"
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise ValueError(f"{flag} {path} is being written by another sern check; wait "
+                             "for it or choose another file") from None
+        yield
+    finally:
+        os.close(fd)
+
+
+def _run(args, checks, run_dir, registry) -> int:
+    from tqdm import tqdm
+
+    from sern_jax.commands.scripts import script_module
+    from sern_jax.infra import io
+
+    fw = script_module("proofs_check", "framework")
+    report = script_module("proofs_check", "report")
     bar = tqdm(checks, desc="sern check", unit="check", file=sys.stderr,
                disable=None)
     ctx = fw.Context(quick=args.quick, seeds=args.seeds, alpha=args.alpha,

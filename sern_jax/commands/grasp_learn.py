@@ -1,5 +1,5 @@
 """``sern grasp dataset | pretrain | screen | learn``: arguments only; work happens in
-:mod:`dataset`, :mod:`pretrain` and :mod:`runner` (imported inside each command, so
+:mod:`dataset`, :mod:`pretrain` and :mod:`driver` (imported inside each command, so
 ``sern --help`` stays fast: only the learners' registry is imported up front, ~0.75 s of
 jax/optax imports, so that every registered learner's hyperparameters are flags). Figures are handed in by :mod:`sern_jax.commands.main`."""
 
@@ -190,11 +190,9 @@ def _run_pretrain(args) -> int:
         raise ValueError(_pretrain_flags(str(e))) from None
     # D0's size from its config.json (and summary.json when finished), before loading it
     try:
-        data_config = dataset.DatasetConfig(**io.load_json(Path(args.data, "config.json"))[
-            "config"])
-    except (OSError, ValueError, TypeError, KeyError) as exc:
-        raise ValueError(f"--data {args.data}: config.json is unreadable or not a dataset's "
-                         f"({type(exc).__name__}); rerun `sern grasp dataset`") from None
+        data_config, _ = dataset.read_config(Path(args.data, "config.json"))
+    except ValueError as exc:
+        raise ValueError(f"--data {args.data}: {exc}") from None
     grasps = data_config.max_grasps
     with contextlib.suppress(OSError, ValueError, TypeError, KeyError):
         grasps = int(io.load_json(Path(args.data, "summary.json"))["labelled_grasps"])
@@ -205,7 +203,7 @@ def _run_pretrain(args) -> int:
         core_k=args.core_k, screen_objects=len(objects.object_names()),
         screen_poses=args.screen_poses, screen_trials=args.screen_trials), args.out)
     manifest = pretrain.pretrain(args.data, config, args.out, progress=not args.no_progress)
-    theta0 = artifacts.load_theta0(args.out)
+    theta0 = artifacts.load_theta0(args.out, flag="--out")
     specs = [objects.make_object(n) for n in objects.object_names()]
     rows = pretrain.screen(theta0.network, theta0.params, specs, args.screen_poses,
                            args.screen_trials, progress=not args.no_progress)
@@ -358,7 +356,7 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--backend", choices=("native", "mjx"), default="native",
                    help="physics of the trials: native MuJoCo on the CPU's cores, or MJX "
                         "(for a GPU: one compile per object, then batches of "
-                        "runner.MJX_BATCH trials); outcomes of the two agree on ~95%% of "
+                        "config.MJX_BATCH trials); outcomes of the two agree on ~95%% of "
                         "trials, not bit for bit, so tables differ")
     p.add_argument("--out", default=None, help="run directory (default runs/learn-<hash>)")
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
@@ -508,10 +506,13 @@ def check_learn_args(args, num_objects: int | None = None):
     number of objects is known, the run's size (:mod:`sern_jax.grasp.online.budget`). Returns the
     OnlineConfig. ``sern reproduce`` calls it before its first part runs."""
     _check_out(args.out)
+    from sern_jax.infra import io
+
+    io.refuse_if_locked(args.out)  # a running learn there: refused before imports, compiles
     _check_file_out(args.json_out)
-    policies = tuple(s.strip() for s in args.policies.split(",") if s.strip())
+    policies = tuple(validate.comma_list(args.policies, "--policies"))
     _check_learn_values(args, policies)
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as online_config
 
     hyper = learner_hyperparameters(args)
     from sern_jax.learners import registry
@@ -521,7 +522,7 @@ def check_learn_args(args, num_objects: int | None = None):
     validate.float32_hyperparameters(
         hyper, {n: f.metadata["flag"] for n, f in registry.hyperparameters().items()})
     try:
-        config = runner.OnlineConfig(
+        config = online_config.OnlineConfig(
             policies=policies, num_seeds=args.seeds, rounds=args.rounds,
             explore=args.explore, evaluate=args.evaluate, alpha=args.alpha,
             epsilon=args.epsilon, alpha0=args.alpha0, p=args.p, eval_poses=args.eval_poses,
@@ -544,7 +545,8 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     ray = distributed.from_args(args)  # None without --ray
     distributed.check_backend(config.backend, ray)  # mjx tasks on a GPU only
     from sern_jax.grasp.model import artifacts
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import config as online_config
+    from sern_jax.grasp.online import driver
 
     # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
     # such even where θ0 is missing); the default objects come from θ0's screen
@@ -558,12 +560,12 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
         specs = _specs((), (), artifacts.hard_set(theta0)["objects"])
         _check_learn_size(config, len(specs), args.out)
     t0 = time.perf_counter()
-    fingerprint = runner.run_fingerprint(config, specs, theta0)
+    fingerprint = online_config.run_fingerprint(config, specs, theta0)
     out = Path(args.out) if args.out else Path("runs") / ("learn-" + fingerprint)
     _check_run_dir(out, fingerprint)
     with validate.locked_run_dir(out):
         if ray is None:
-            res = runner.run(config, specs, out, theta0=theta0,
+            res = driver.run(config, specs, out, theta0=theta0,
                              progress=not args.no_progress, log=log)
         else:  # one Ray task per object, joined into the same run directory
             from sern_jax.grasp.online import learn_units

@@ -60,16 +60,19 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
     p.add_argument("--delta", type=float, default=None,
                    help=f"the wheel bandit's δ in (0, 1) (Riquelme et al.: 0.5, 0.7, 0.9, "
                         f"0.95, 0.99; default {_NEURAL.delta})")
-    p.add_argument("--update-every", type=int, default=_NEURAL.update_every,
-                   help="neural: decisions between network updates (divides --horizon)")
-    p.add_argument("--hidden", default=",".join(map(str, _NEURAL.hidden)),
-                   help="neural: the MLP's hidden widths, comma list")
-    p.add_argument("--fit-steps", type=int, default=_NEURAL.fit_steps,
-                   help="neural: Adam minibatch steps per update")
-    p.add_argument("--batch-size", type=int, default=_NEURAL.batch_size,
-                   help="neural: rows per minibatch step")
-    p.add_argument("--learning-rate", type=float, default=_NEURAL.learning_rate,
-                   help="neural: Adam step size")
+    p.add_argument("--update-every", type=int, default=None,
+                   help=f"neural: decisions between network updates (divides --horizon; "
+                        f"default {_NEURAL.update_every})")
+    p.add_argument("--hidden", default=None,
+                   help=f"neural: the MLP's hidden widths, comma list (default "
+                        f"{','.join(map(str, _NEURAL.hidden))})")
+    p.add_argument("--fit-steps", type=int, default=None,
+                   help=f"neural: Adam minibatch steps per update (default "
+                        f"{_NEURAL.fit_steps})")
+    p.add_argument("--batch-size", type=int, default=None,
+                   help=f"neural: rows per minibatch step (default {_NEURAL.batch_size})")
+    p.add_argument("--learning-rate", type=float, default=None,
+                   help=f"neural: Adam step size (default {_NEURAL.learning_rate})")
     p.add_argument("--deltas", default=None,
                    help="neural wheel: a comma list of δ, one run directory each under --out "
                         "(d<δ>), one compilation for all (δ is a traced argument); replaces "
@@ -82,8 +85,9 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                         f"across arms (pooled) or keep one per arm (arm) (default "
                         f"{_NEURAL.nl_sigma2}; a Neural-Linear folder made before the "
                         f"pooled default resumes with arm)")
-    p.add_argument("--context-dim", type=int, default=_NEURAL.context_dim,
-                   help="neural finite/linear problems: context feature dimension d")
+    p.add_argument("--context-dim", type=int, default=None,
+                   help=f"neural finite/linear problems: context feature dimension d "
+                        f"(default {_NEURAL.context_dim})")
     p.add_argument("--arms", type=int, default=None,
                    help=f"number of arms K (default {d.num_arms}; neural: {_NEURAL.num_arms}, "
                         f"the wheel has 5)")
@@ -93,7 +97,9 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
     p.add_argument("--contexts", type=int, default=None,
                    help=f"number of i.i.d. contexts M (M > 1: random problem with gap --gap; "
                         f"default {d.num_contexts}; neural finite: {_NEURAL.num_contexts})")
-    p.add_argument("--gap", type=float, default=d.gap, help="Assumption-1 gap Δ2 when M > 1")
+    p.add_argument("--gap", type=float, default=None,
+                   help=f"Assumption-1 gap Δ2 when M > 1 (default {d.gap}; neural finite: "
+                        f"{_NEURAL.gap})")
     p.add_argument("--horizon", "-T", type=int, default=None,
                    help=f"rounds T (default {d.horizon}; neural: {_NEURAL.horizon})")
     p.add_argument("--seeds", "-S", type=int, default=None,
@@ -101,9 +107,14 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                         f"{_NEURAL.num_seeds})")
     p.add_argument("--schedule", default=d.schedule,
                    help="constant (α = α0), log (α0/ln(T^p), Algorithm 1), theorem4")
-    p.add_argument("--alpha", type=float, default=d.alpha0, help="SERN temperature α0 > 0")
-    p.add_argument("--p", type=float, default=d.p, help="schedule exponent p")
-    p.add_argument("--epsilon", type=float, default=d.epsilon, help="ε of ε-greedy, in [0, 1]")
+    p.add_argument("--alpha", type=float, default=None,
+                   help=f"SERN temperature α0 > 0 (default {d.alpha0}; neural: "
+                        f"{_NEURAL.alpha0})")
+    p.add_argument("--p", type=float, default=None,
+                   help=f"schedule exponent p > 0, for --schedule log and theorem4 (neural: "
+                        f"--policies sern_log) (default {d.p})")
+    p.add_argument("--epsilon", type=float, default=None,
+                   help=f"ε of ε-greedy, in [0, 1] (default {d.epsilon})")
     p.add_argument("--seed", type=int, default=d.seed, help="root seed")
     p.add_argument("--checkpoints", type=int, default=d.num_checkpoints,
                    help="log-spaced checkpoints of t")
@@ -140,36 +151,72 @@ def _or(value, default):
     return default if value is None else value
 
 
+# Flags of one estimator family only, by argparse dest: given with the other, they would do
+# nothing, so they are refused (a flag that has no effect is a mistake the user wants to hear
+# about).
+_NEURAL_ONLY = {"update_every": None, "hidden": None, "fit_steps": None, "batch_size": None,
+                "learning_rate": None, "context_dim": None, "nl_prior_mean": None,
+                "nl_sigma2": None, "deltas": None, "delta": None}
+_TABULAR_ONLY = {"float64": False, "devices": 1, "per_seed": True, "means": "linspace",
+                 "schedule": "constant"}
+
+
+def _policies(text: str | None, default: tuple[str, ...]) -> tuple[str, ...]:
+    """``--policies``: a comma list with no empty item and no name twice."""
+    from sern_jax.infra import validate
+
+    return default if text is None else tuple(validate.comma_list(text, "--policies"))
+
+
+def _check_schedule_flags(args, *, uses_p: bool, uses_epsilon: bool, mode: str) -> None:
+    """``--p`` and ``--epsilon`` given where nothing reads them: one line naming the flag."""
+    if args.p is not None and not uses_p:
+        raise ValueError(f"--p has no effect {mode}; leave it out")
+    if args.epsilon is not None and not uses_epsilon:
+        raise ValueError(f"--epsilon has no effect {mode} (no epsilon-greedy policy); leave "
+                         "it out")
+
+
 def _run_neural(args, make_figures: Callable | None) -> int:
     """``--estimator neural``: learners of the registry with an MLP on an exact-reward
     problem (sern_jax/experiment/neural_regret.py); the same run-directory layout."""
+    from sern_jax.infra import validate
+
     mod = _neural()
     nd = mod.NeuralRegretExperiment()
     if args.problem == "bernoulli":
         raise ValueError("--estimator neural needs --problem wheel, finite or linear")
-    if args.float64:
-        raise ValueError("--float64 applies to the tabular estimators, not --estimator neural")
-    if args.devices != 1:
-        raise ValueError("--devices applies to the tabular estimators, not --estimator neural")
-    if not args.per_seed:
-        raise ValueError("--no-per-seed applies to the tabular estimators, not --estimator "
-                         "neural")
-    if args.means != "linspace":
-        raise ValueError("--means applies to --problem bernoulli, not --estimator neural")
-    try:
-        hidden = tuple(int(w) for w in args.hidden.split(",") if w.strip())
-    except ValueError:
-        raise ValueError(f"--hidden must be a comma list of integers, got {args.hidden!r}") \
-            from None
-    policies = (nd.policies if args.policies is None
-                else tuple(s.strip() for s in args.policies.split(",") if s.strip()))
+    validate.refuse_unused(args, _TABULAR_ONLY, "with --estimator neural (it applies to the "
+                           "tabular estimators)")
+    if args.problem != "finite":
+        validate.refuse_unused(args, {"contexts": None, "gap": None},
+                               f"with --problem {args.problem} (it applies to --problem finite)")
+    if args.problem == "wheel":
+        validate.refuse_unused(args, {"context_dim": None},
+                               "with --problem wheel (its contexts are 2-dimensional)")
+    else:
+        validate.refuse_unused(args, {"delta": None, "deltas": None},
+                               f"with --problem {args.problem} (it applies to --problem wheel)")
+    hidden = (nd.hidden if args.hidden is None else
+              tuple(validate.comma_list_of(args.hidden, "--hidden", int, "integers",
+                                           unique=False)))
+    policies = _policies(args.policies, nd.policies)
+    learners = {mod.ALIASES.get(p, p) for p in policies}
+    _check_schedule_flags(args, uses_p="sern_log" in learners,
+                          uses_epsilon="egreedy" in learners,
+                          mode=f"with --estimator neural and --policies {','.join(policies)}")
     exp = mod.NeuralRegretExperiment(
         policies=policies, problem=args.problem, delta=_or(args.delta, nd.delta),
         num_arms=_or(args.arms, nd.num_arms), num_contexts=_or(args.contexts, nd.num_contexts),
-        gap=args.gap, context_dim=args.context_dim, horizon=_or(args.horizon, nd.horizon),
-        num_seeds=_or(args.seeds, nd.num_seeds), update_every=args.update_every,
-        hidden=hidden, fit_steps=args.fit_steps, batch_size=args.batch_size,
-        learning_rate=args.learning_rate, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
+        gap=_or(args.gap, nd.gap), context_dim=_or(args.context_dim, nd.context_dim),
+        horizon=_or(args.horizon, nd.horizon),
+        num_seeds=_or(args.seeds, nd.num_seeds), update_every=_or(args.update_every,
+                                                                   nd.update_every),
+        hidden=hidden, fit_steps=_or(args.fit_steps, nd.fit_steps),
+        batch_size=_or(args.batch_size, nd.batch_size),
+        learning_rate=_or(args.learning_rate, nd.learning_rate),
+        alpha0=_or(args.alpha, nd.alpha0), p=_or(args.p, nd.p),
+        epsilon=_or(args.epsilon, nd.epsilon),
         schedule=args.schedule, seed=args.seed, num_checkpoints=args.checkpoints,
         chunk_size=_or(args.chunk_size, nd.chunk_size),
         nl_prior_mean=_or(args.nl_prior_mean, nd.nl_prior_mean),
@@ -177,11 +224,7 @@ def _run_neural(args, make_figures: Callable | None) -> int:
     if args.deltas is not None:
         if args.delta is not None:
             raise ValueError("--deltas replaces --delta; give one of them")
-        try:
-            deltas = [float(v) for v in args.deltas.split(",") if v.strip()]
-        except ValueError:
-            raise ValueError(f"--deltas must be a comma list of numbers, got "
-                             f"{args.deltas!r}") from None
+        deltas = validate.comma_list_of(args.deltas, "--deltas", float, "numbers")
         out = (Path(args.out) if args.out
                else Path("runs") / f"regret-neural-sweep-{exp.fingerprint()}")
         run_dirs = mod.run_delta_sweep(exp, deltas, out, progress=not args.no_progress)
@@ -211,18 +254,26 @@ def run(args, *, defaults: Any, run_experiment: Callable,
     if args.problem != "bernoulli":
         raise ValueError(f"--problem {args.problem} needs --estimator neural (the tabular "
                          f"estimators run --problem bernoulli)")
-    for flag in ("nl_prior_mean", "nl_sigma2", "deltas", "delta"):
-        if getattr(args, flag) is not None:
-            raise ValueError(f"--{flag.replace('_', '-')} applies to --estimator neural, not "
-                             f"the tabular estimators")
+    from sern_jax.infra import validate
+
+    validate.refuse_unused(args, _NEURAL_ONLY, f"with --estimator {args.estimator} (it applies "
+                           "to --estimator neural)")
     d = defaults
+    policies = _policies(args.policies, d.policies)
+    _check_schedule_flags(args, uses_p=args.schedule in ("log", "theorem4"),
+                          uses_epsilon="epsilon_greedy" in policies,
+                          mode=f"with --schedule {args.schedule} and --policies "
+                               f"{','.join(policies)}")
+    if args.gap is not None and _or(args.contexts, d.num_contexts) <= 1:
+        raise ValueError("--gap has no effect with one context (it sets the random problem of "
+                         "--contexts M > 1); leave it out")
     exp = dataclasses.replace(
-        defaults, policies=(d.policies if args.policies is None else
-                            tuple(s.strip() for s in args.policies.split(",") if s.strip())),
+        defaults, policies=policies,
         estimator=args.estimator, num_arms=_or(args.arms, d.num_arms), means=args.means,
-        num_contexts=_or(args.contexts, d.num_contexts), gap=args.gap,
+        num_contexts=_or(args.contexts, d.num_contexts), gap=_or(args.gap, d.gap),
         horizon=_or(args.horizon, d.horizon), num_seeds=_or(args.seeds, d.num_seeds),
-        schedule=args.schedule, alpha0=args.alpha, p=args.p, epsilon=args.epsilon,
+        schedule=args.schedule, alpha0=_or(args.alpha, d.alpha0), p=_or(args.p, d.p),
+        epsilon=_or(args.epsilon, d.epsilon),
         seed=args.seed, num_checkpoints=args.checkpoints,
         chunk_size=_or(args.chunk_size, d.chunk_size),
         float64=args.float64, devices=args.devices,

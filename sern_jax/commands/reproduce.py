@@ -147,10 +147,10 @@ def _rel(path: Path, root: Path) -> str:
 
 
 def _paired_lines(learn_dir: Path) -> list[str]:
-    """The summary's lead: SERN − each peer in the final round, pooled over the objects per
-    seed, with Student-t intervals over the seeds and Holm over every difference listed
-    (both evaluations, both peers). Win counts on unresolved differences are not evidence
-    and are not printed."""
+    """The summary's first lines: SERN − each peer in the final round, pooled over the
+    objects per seed, with Student-t intervals over the seeds and Holm over every
+    difference listed (both evaluations, both peers). Win counts on unresolved differences
+    are not evidence and are not printed."""
     import numpy as np
 
     from sern_jax.infra import io
@@ -188,8 +188,6 @@ def _paired_lines(learn_dir: Path) -> list[str]:
 
 def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, size, timings,
             quick) -> str:
-    from sern_jax.commands import grasp_learn as learn_cli
-
     results = _checks(check_doc)
     ok = sum(1 for r in results if r.get("ok"))
     lines = [
@@ -216,11 +214,40 @@ def _report(out, check_doc, check_status, regret_dir, regret_figs, table, hard, 
         f"{size['seeds']} seeds x {size['rounds']} rounds of 20 exploration + 5 evaluation "
         "grasps; SERN α = 0.05, ε-greedy ε = 0.1. Round i = after i updates; θ0 = before "
         "learning.", "",
-        learn_cli.format_table(table), "",
+        _table_markdown(table), "",
         "![success](learn/figures/success.png)", "",
         "![paired](learn/figures/paired.png)", "",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _table_markdown(rows: list[dict]) -> str:
+    """Table I as docs/RESULTS.md prints it: per round the 5-grasp success, mean over the
+    seeds, with its standard error over the seeds (SE = sd/√seeds, ddof 1) in parentheses,
+    the statistic the paper's Table I prints; then the fixed-pose evaluation's means."""
+    num_r = len(rows[0]["rounds"])
+    head = ["object", "policy", "θ0"] + [f"round {i + 1}" for i in range(num_r)] + [
+        "max", "Imprv"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        se = r.get("se") or [None] * num_r
+        cells = [r["object"], r["policy"], f"{r['theta0']:.0f} %"]
+        cells += [f"{m:.0f} %" + (f" (SE {e:.2f})" if e is not None else "")
+                  for m, e in zip(r["rounds"], se)]
+        cells += [f"{r['max']:.0f} %", "n/a" if r["imprv"] is None
+                  else f"{100 * r['imprv']:.0f} %"]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "(SE: standard error over the seeds, sd/√seeds with ddof 1, as "
+              "docs/RESULTS.md and the paper's Table I print it.)"]
+    if "lowvar_rounds" in rows[0]:
+        lines += ["", "Fixed-pose evaluation (greedy success on fixed poses, mean over the "
+                  "seeds; round 0 = θ0):", ""]
+        head = ["object", "policy"] + [f"R{i}" for i in range(num_r + 1)]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in rows:
+            lines.append("| " + " | ".join([r["object"], r["policy"]] + [
+                f"{m:.0f} %" for m in r["lowvar_rounds"]]) + " |")
+    return "\n".join(lines)
 
 
 def _summary(check_doc, check_status, regret_dir, table, timings, out,

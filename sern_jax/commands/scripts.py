@@ -31,7 +31,7 @@ def script_package(folder: str) -> ModuleType:
 
 
 def script_module(folder: str, name: str) -> ModuleType:
-    """The module ``name`` of a script folder, e.g. ``script_module("experiments", "regret")``."""
+    """The module ``name`` of a script folder, e.g. ``script_module("experiments", "grasp_learning")``."""
     return importlib.import_module(f"{script_package(folder).__name__}.{name}")
 
 

@@ -69,21 +69,25 @@ def min_alpha(dtype: str) -> float:
     return 1.0 / 80.0 if dtype == "float32" else 1.0 / 700.0
 
 
-def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool:
+def supports(config: sim.RunConfig, params: sim.RunParams | None = None, *,
+             validated: bool = False) -> bool:
     """Whether :func:`make_fast_run` reproduces ``simulate.make_run(config)`` exactly.
 
     Args:
       config: the run configuration.
       params: optional; when given, also checks α(T) ≥ :func:`min_alpha` (host-side).
+      validated: the caller has run ``simulate.validate(config)`` already (a run's plan
+        validates once), so it is not run again.
 
     Returns:
       True for softmax, one context, no diagnostics, a local estimator, the threefry PRNG in
       partitionable mode (so the replicated hashes equal ``jax.random``'s), and a valid config.
     """
-    try:
-        sim.validate(config)
-    except ValueError:
-        return False
+    if not validated:
+        try:
+            sim.validate(config)
+        except ValueError:
+            return False
     ok = (config.policy == "softmax" and config.num_contexts == 1 and not config.diagnostics
           and config.estimator in est_lib.LOCAL_ESTIMATORS and config.horizon < 2**24
           and bool(jax.config.jax_threefry_partitionable)

@@ -81,18 +81,21 @@ LOOKAHEAD = 3
 PULLED_TRIES = 2
 
 
-def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool:
+def supports(config: sim.RunConfig, params: sim.RunParams | None = None, *,
+             validated: bool = False) -> bool:
     """Whether :func:`make_batched` reproduces ``vmap(simulate.make_run(config))``.
 
     True for the Thompson policy, one context, no diagnostics, a valid config and the threefry
     PRNG in partitionable mode (so the replicated hashes equal ``jax.random``'s). ``params``
-    is accepted for symmetry with ``fast_softmax.supports`` and not needed.
+    is accepted for symmetry with ``fast_softmax.supports`` and not needed; ``validated``: the
+    caller has run ``simulate.validate(config)`` already.
     """
     del params
-    try:
-        sim.validate(config)
-    except ValueError:
-        return False
+    if not validated:
+        try:
+            sim.validate(config)
+        except ValueError:
+            return False
     return (config.policy == "thompson" and config.num_contexts == 1
             and not config.diagnostics and bool(jax.config.jax_threefry_partitionable)
             and str(jax.config.jax_default_prng_impl) == "threefry2x32")

@@ -2,8 +2,9 @@
 
 ``make_run(config, problem, learner, model)`` returns ``run(key, params=None) ->
 NeuralRunOutput`` for one seed; :func:`run_seeds` vmaps it over seeds ``fold_in(key(seed), i)``
-(the tabular engine's :func:`sern_jax.engine.simulate.seed_keys`) in fixed-shape chunks, so seed i
-gives the same result alone or among 10,000. ``params``: the problem's traced parameters
+(the tabular engine's :func:`sern_jax.engine.simulate.seed_keys`) in fixed-shape chunks,
+through the one seed driver (:mod:`sern_jax.engine.drive`), so seed i gives the same result
+alone or among 10,000. ``params``: the problem's traced parameters
 (``contextual_problems.WheelParams``: δ), so a δ sweep is one compiled program
 (``run_seeds(run, ..., params=WheelParams(δ))``); None: the problem's own values, closed
 over.
@@ -32,14 +33,13 @@ Regret (in the problem's units; the learners see rewards scaled to [0, 1]):
 (Rao–Blackwellised; an index learner's π is its one-hot). Field names match
 :class:`sern_jax.engine.simulate.RunOutput`, so the regret experiment's files read the same.
 
-This module imports jax, numpy and the core; the network comes in as a ``Model``.
+This module imports jax, numpy, the core, the learners' interface and the seed driver; the
+network comes in as a ``Model``.
 """
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
-import math
 from typing import Callable, NamedTuple, Optional
 
 import jax
@@ -48,9 +48,11 @@ import numpy as np
 
 from sern_jax.core import policies as pol
 from sern_jax.core.contextual_problems import ContextualBandit
-from sern_jax.learners import base
-from sern_jax.engine.simulate import AGENT_STREAM, ENV_STREAM, ROUNDS_STREAM, kahan_add, seed_keys
 from sern_jax.core.types import Array, Key
+from sern_jax.engine import drive
+from sern_jax.engine import plan as plan_lib
+from sern_jax.engine.simulate import AGENT_STREAM, ENV_STREAM, ROUNDS_STREAM, kahan_add
+from sern_jax.learners import base
 
 __all__ = [
     "MODEL_STREAM",
@@ -385,69 +387,14 @@ def run_seeds(run: Callable[[Key], NeuralRunOutput], seed: int = 0, num_seeds: i
     Every call has ``chunk_size`` seeds (the last one padded), so any ``num_seeds`` shares
     one compilation; seed i uses ``fold_in(key(seed), i)`` whatever the chunking. Calls run
     ``workers`` at a time from host threads (default 1: one call at a time, which XLA
-    parallelises inside. Two concurrent calls of a Neural-Linear program on the 2-core CPU
-    hung with both threads waiting for their results, the intra-op thread pool apparently
-    starved; the tabular executor's one-call-per-core rule is not used here).
+    parallelises inside; see :func:`sern_jax.engine.plan.plan_neural`), through the tabular
+    engine's seed driver (:func:`sern_jax.engine.drive.run_plan`).
 
     ``params``: the problem's traced parameters (e.g. ``WheelParams(δ)``), passed to every
     call as an argument of the compiled program, so other values reuse the compilation;
     None: ``run(key)`` with the problem's own values.
     """
-    if isinstance(num_seeds, bool) or not isinstance(num_seeds, (int, np.integer)) \
-            or num_seeds < 1:
-        raise ValueError(f"--seeds must be an integer >= 1, got {num_seeds!r}")
-    if isinstance(first_seed, bool) or int(first_seed) < 0 or \
-            int(first_seed) + num_seeds > 2**32:
-        raise ValueError(f"first_seed must be in [0, 2^32 - num_seeds], got {first_seed!r}")
-    workers = 1 if workers is None else max(1, int(workers))
-    if chunk_size is None:
-        chunk_size = -(-num_seeds // workers)
-    chunk = int(chunk_size)
-    if chunk < 1:
-        raise ValueError(f"--chunk-size must be >= 1, got {chunk_size!r}")
-    root = jax.random.key(seed)
-    traced = params is not None
-    if traced:
-        params = jax.tree.map(lambda v: jnp.asarray(v, jnp.float32), params)
-    base_fn = _batched(run, traced)
-    fn = (lambda k: base_fn(k, params)) if traced else base_fn
-    starts = list(range(0, num_seeds, chunk))
-    workers = max(1, min(workers, len(starts)))
-    if workers > 1:  # compile once here: worker threads must not trace
-        if traced:
-            compiled = base_fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype),
-                                     params).compile()
-            fn = lambda k: compiled(k, params)  # noqa: E731
-        else:
-            fn = base_fn.lower(jax.ShapeDtypeStruct((chunk,), root.dtype)).compile()
-    result: list = [None] * len(starts)
-    # every chunk's keys made here, in the calling thread: worker threads only run the
-    # compiled program (no tracing or eager dispatch in threads)
-    keys = [seed_keys(root, chunk, int(first_seed) + start) for start in starts]
-
-    def one(i: int):
-        start = starts[i]
-        out = fn(keys[i])
-        size = min(chunk, num_seeds - start)
-        result[i] = jax.tree.map(lambda a: np.asarray(a)[:size], out)
-        return size
-
-    done = 0
-    if workers == 1:
-        for i in range(len(starts)):
-            done += one(i)
-            if progress is not None:
-                progress(done)
-    else:
-        with concurrent.futures.ThreadPoolExecutor(workers) as pool:
-            for fut in concurrent.futures.as_completed([pool.submit(one, i)
-                                                        for i in range(len(starts))]):
-                done += fut.result()
-                if progress is not None:
-                    progress(done)
-    if len(result) == 1:
-        return result[0]
-    return jax.tree.map(lambda *parts: np.concatenate(parts, axis=0), *result)
-
-
-del math
+    plan = plan_lib.plan_neural(_batched(run, params is not None), num_seeds,
+                                first_seed=first_seed, chunk_size=chunk_size,
+                                workers=workers, params=params)
+    return drive.run_plan(plan, seed, progress)

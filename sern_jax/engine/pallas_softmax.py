@@ -7,9 +7,9 @@ float32, with K a power of two, 2 ≤ K ≤ 256: Triton tensors have power-of-tw
 :func:`_tiled_prefix_sums` follows XLA's cumsum order only up to 16 tiles of 16).
 
 Why a kernel. On a GPU the XLA engine keeps each seed's ``[K]`` weights, prefix sums,
-statistics and compensator in HBM and streams them through every round (1.03G seed-rounds/s
-on one H100 at K = 64: 1.031–1.035G in every pallas record, experiments/results/bench/). Here one program instance owns ``seeds_per_program`` seeds, holds
-their ``[B, K]`` state in registers for all T rounds, and writes only the checkpoint outputs.
+statistics and compensator in HBM and streams them through every round. Here one program
+instance owns ``seeds_per_program`` seeds, holds their ``[B, K]`` state in registers for all T
+rounds, and writes only the checkpoint outputs.
 
 What one seed-round does (the same as :mod:`sern_jax.engine.fast_softmax`, op for op):
 
@@ -44,10 +44,9 @@ One device only: the kernel is not sharded (``sern bench bandit --pallas`` refus
 ``--devices`` > 1), and nothing public calls it: it is a bench-only path beside the engine.
 Use ``interpret=True`` off-GPU (tests); on a GPU the kernel compiles through Triton
 (``jax.experimental.pallas.triton.CompilerParams``; Mosaic GPU is JAX's default otherwise).
-Measured on one H100 (jax 0.11.2; experiments/results/bench/pallas_README.md): 5.00G
-seed-rounds/s at K = 64, T = 10^4, 200,000 seeds, 4.85× the fast engine in the same process,
-outputs as above on every seed. jax 0.11.2 warns that the Pallas Triton backend is deprecated
-and will be removed in a future version: this module then needs Mosaic GPU or jax_triton.
+Its rates beside the engine's are recorded in ``experiments/results/bench/`` (``sern bench
+bandit --pallas``). The Pallas Triton backend is deprecated in recent jax releases: this
+module then needs Mosaic GPU or jax_triton.
 """
 
 from __future__ import annotations
@@ -161,37 +160,9 @@ class _State(NamedTuple):
     min_prob: Array  # [B]
 
 
-def make_pallas_run(
-    config: sim.RunConfig,
-    *,
-    seeds_per_program: int = DEFAULT_SEEDS_PER_PROGRAM,
-    num_warps: int = DEFAULT_NUM_WARPS,
-    block: int = fast_softmax.DEFAULT_BLOCK,
-    rebase: str = "tiled16",
-    interpret: bool = False,
-) -> Callable[[Array, sim.RunParams], sim.RunOutput]:
-    """Builds ``fn(keys [S], params) -> RunOutput`` (each field with a leading S), to be jitted.
-
-    Args:
-      config: with ``supports(config)``; otherwise ``ValueError``.
-      seeds_per_program: B, a power of two ≥ 1: seeds per program instance (S is padded to a
-        multiple; the padding seeds are dropped).
-      num_warps: Triton warps per program (GPU only).
-      block: rounds between rebases (the engine's ``DEFAULT_BLOCK``: change it only to
-        compare with an engine built with the same block), a power of two.
-      rebase: the order of the prefix sums at each rebase: ``"tiled16"`` (XLA's order for the
-        engine's cumsum, :func:`_tiled_prefix_sums`), ``"sequential"`` (left to right) or
-        ``"scan"`` (``jnp.cumsum``: XLA's in the interpreter, Triton's scan on a GPU, whose
-        order differs from XLA's); the last two are kept for measurements.
-      interpret: run the kernel in Pallas' interpreter (CPU, tests).
-
-    Returns:
-      ``fn``: key is consumed per seed exactly as in ``simulate.make_run``; outputs on
-      ``simulate.checkpoint_times(config)``; ``diag`` None. α below
-      ``fast_softmax.min_alpha`` gives NaN outputs, as the engine.
-    """
-    from jax.experimental import pallas as pl
-
+def _check(config: sim.RunConfig, seeds_per_program, num_warps, block, rebase) -> None:
+    """``ValueError`` unless the kernel reproduces the engine for ``config`` and the options
+    are valid (host-side, before anything is traced)."""
     sim.validate(config)
     if not supports(config):
         raise ValueError(
@@ -207,45 +178,55 @@ def make_pallas_run(
     if rebase not in REBASE_MODES:
         raise ValueError(f"rebase must be one of {REBASE_MODES}, got {rebase!r}")
 
+
+def _div(x, y):
+    # Plain ``/``: Triton's float32 division is XLA's; IEEE div.rn.f32 is not always.
+    return x / y
+
+
+def _rhat(estimator: str, n, s, r_true, pin, dtype):
+    """The engine's r̂ of each arm from its pulls ``n`` and reward sums ``s`` (clipped)."""
+    if estimator == "addhalf":  # the engine's tabular_rhat, with an IEEE division
+        r = _div(s + 0.5, n + 1.0)
+    elif estimator == "mean":
+        r = jnp.where(n > 0, _div(s, jnp.maximum(n, 1.0)), 0.5)
+    elif estimator in ("l1median", "l1argmax"):
+        from sern_jax.core import estimators as est_lib
+
+        r = est_lib.tabular_rhat(estimator, n, s, dtype)  # no division
+    elif estimator == "exact":
+        r = r_true
+    elif estimator == "pinned":
+        r = jnp.where(pin, 0.0, 1.0).astype(dtype)
+    else:  # pragma: no cover - supports() rules it out
+        raise AssertionError(estimator)
+    return jnp.clip(r, 0.0, 1.0)
+
+
+def _uniform_tile(k1, k2, t0, index: int, shape: tuple[int, int], dtype):
+    """``[B, block]``: ``uniform(fold_in(key, t0 + j), ·)[index]`` for rounds j, from the
+    key words ``k1, k2`` [B] (the counter-based threefry hashes of ``jax.random``)."""
+    t = t0.astype(jnp.uint32) + jax.lax.broadcasted_iota(jnp.uint32, shape, 1)
+    f1, f2 = threefry2x32(k1[:, None], k2[:, None], jnp.zeros_like(t), t)
+    b1, b2 = threefry2x32(f1, f2, np.uint32(0), np.uint32(index))
+    bits = ((b1 ^ b2) >> np.uint32(9)) | np.uint32(0x3F800000)
+    return jax.lax.bitcast_convert_type(bits, dtype) - dtype(1.0)
+
+
+def _make_kernel(config: sim.RunConfig, big_b: int, block: int, rebase_mode: str,
+                 num_g: int) -> Callable:
+    """The kernel body: one program instance plays all T rounds of its ``big_b`` seeds with
+    their ``[B, K]`` state on chip and writes the ``num_g`` checkpoints' outputs."""
     num_arms = config.num_arms
     dtype = jnp.float32
-    big_b = int(seeds_per_program)
-    segs = _segments(config, block)
-    num_g = segs.shape[0]
-    amin = fast_softmax.min_alpha(config.dtype)
     estimator = config.estimator
-    rebase_mode = rebase
     tile = 16 if rebase_mode == "tiled16" else num_arms  # "sequential": one tile
 
-    def div(x, y):
-        # Plain ``/``: on the H100 Triton's float32 division equals XLA's on 100 % of the
-        # probe's add-half quotients, IEEE div.rn.f32 on 71 % only (pallas_ops_probe_h100.json).
-        return x / y
-
     def rhat(n, s, r_true, pin):
-        if estimator == "addhalf":  # the engine's tabular_rhat, with an IEEE division
-            r = div(s + 0.5, n + 1.0)
-        elif estimator == "mean":
-            r = jnp.where(n > 0, div(s, jnp.maximum(n, 1.0)), 0.5)
-        elif estimator in ("l1median", "l1argmax"):
-            from sern_jax.core import estimators as est_lib
-
-            r = est_lib.tabular_rhat(estimator, n, s, dtype)  # no division
-        elif estimator == "exact":
-            r = r_true
-        elif estimator == "pinned":
-            r = jnp.where(pin, 0.0, 1.0).astype(dtype)
-        else:  # pragma: no cover - supports() rules it out
-            raise AssertionError(estimator)
-        return jnp.clip(r, 0.0, 1.0)
+        return _rhat(estimator, n, s, r_true, pin, dtype)
 
     def uniform_tile(k1, k2, t0, index):
-        """``[B, block]``: ``uniform(fold_in(key, t0 + j), ·)[index]`` for rounds j."""
-        t = t0.astype(jnp.uint32) + jax.lax.broadcasted_iota(jnp.uint32, (big_b, block), 1)
-        f1, f2 = threefry2x32(k1[:, None], k2[:, None], jnp.zeros_like(t), t)
-        b1, b2 = threefry2x32(f1, f2, np.uint32(0), np.uint32(index))
-        bits = ((b1 ^ b2) >> np.uint32(9)) | np.uint32(0x3F800000)
-        return jax.lax.bitcast_convert_type(bits, dtype) - dtype(1.0)
+        return _uniform_tile(k1, k2, t0, index, (big_b, block), dtype)
 
     def kernel(seg_ref, env0_ref, env1_ref, ag0_ref, ag1_ref, means_ref, inva_ref, pin_ref,
                reg_ref, rb_ref, cnt_ref, comp_ref, mp_ref):
@@ -295,7 +276,7 @@ def make_pallas_run(
             r_arm = pick(onehot, means)
             pin = pick(onehot, pinned.astype(dtype)) > 0.5 if estimator == "pinned" else None
             reward = (u_r < r_arm).astype(dtype)
-            inv_w = div(jnp.ones_like(c.big_w), c.big_w)
+            inv_w = _div(jnp.ones_like(c.big_w), c.big_w)
             reg = c.reg + (best - r_arm)
             reg_rb = c.reg_rb + (best - c.s_wr * inv_w)
             min_prob = jnp.minimum(c.min_prob, jnp.min(c.w, axis=1) * inv_w)
@@ -342,7 +323,18 @@ def make_pallas_run(
                     min_prob=jnp.ones((big_b,), dtype))
         jax.lax.fori_loop(0, num_g, segment, c0)
 
-    def call(seg, env0, env1, ag0, ag1, means, inv_alpha, pinned_arm):
+    return kernel
+
+
+def _make_launch(kernel: Callable, num_arms: int, num_g: int, big_b: int, num_warps: int,
+                 interpret: bool) -> Callable:
+    """``launch(seg, env0, env1, ag0, ag1, means, inv_alpha, pinned_arm)``: the
+    ``pallas_call`` of ``kernel`` over the seeds, ``big_b`` per program instance; returns
+    (regret [S, G], Rao–Blackwellised regret [S, G], counts [S, G, K], compensator
+    [S, G, K], min π [S, G])."""
+    from jax.experimental import pallas as pl
+
+    def launch(seg, env0, env1, ag0, ag1, means, inv_alpha, pinned_arm):
         num_seeds = env0.shape[0]
         row = lambda i: (i,)
         row2 = lambda i: (i, 0)
@@ -372,6 +364,46 @@ def make_pallas_run(
             interpret=interpret, name="sern_softmax_fused", **kwargs,
         )(seg, env0, env1, ag0, ag1, means, inv_alpha, pinned_arm)
 
+    return launch
+
+
+def make_pallas_run(
+    config: sim.RunConfig,
+    *,
+    seeds_per_program: int = DEFAULT_SEEDS_PER_PROGRAM,
+    num_warps: int = DEFAULT_NUM_WARPS,
+    block: int = fast_softmax.DEFAULT_BLOCK,
+    rebase: str = "tiled16",
+    interpret: bool = False,
+) -> Callable[[Array, sim.RunParams], sim.RunOutput]:
+    """Builds ``fn(keys [S], params) -> RunOutput`` (each field with a leading S), to be jitted.
+
+    Args:
+      config: with ``supports(config)``; otherwise ``ValueError``.
+      seeds_per_program: B, a power of two ≥ 1: seeds per program instance (S is padded to a
+        multiple; the padding seeds are dropped).
+      num_warps: Triton warps per program (GPU only).
+      block: rounds between rebases (the engine's ``DEFAULT_BLOCK``: change it only to
+        compare with an engine built with the same block), a power of two.
+      rebase: the order of the prefix sums at each rebase: ``"tiled16"`` (XLA's order for the
+        engine's cumsum, :func:`_tiled_prefix_sums`), ``"sequential"`` (left to right) or
+        ``"scan"`` (``jnp.cumsum``: XLA's in the interpreter, Triton's scan on a GPU, whose
+        order differs from XLA's); the last two are kept for measurements.
+      interpret: run the kernel in Pallas' interpreter (CPU, tests).
+
+    Returns:
+      ``fn``: key is consumed per seed exactly as in ``simulate.make_run``; outputs on
+      ``simulate.checkpoint_times(config)``; ``diag`` None. α below
+      ``fast_softmax.min_alpha`` gives NaN outputs, as the engine.
+    """
+    _check(config, seeds_per_program, num_warps, block, rebase)
+    dtype = jnp.float32
+    big_b = int(seeds_per_program)
+    segs = _segments(config, block)
+    amin = fast_softmax.min_alpha(config.dtype)
+    kernel = _make_kernel(config, big_b, block, rebase, segs.shape[0])
+    launch = _make_launch(kernel, config.num_arms, segs.shape[0], big_b, num_warps, interpret)
+
     def per_seed_inputs(key: Key, params: sim.RunParams):
         # The engine's key derivation (fast_softmax.make_fast_run), once per seed, outside.
         key_env = jax.random.fold_in(key, sim.ENV_STREAM)
@@ -395,7 +427,7 @@ def make_pallas_run(
                                   params.p)
         inv_alpha = jnp.broadcast_to((1.0 / alpha).astype(dtype), (padded,))
         pinned_arm = jnp.broadcast_to(params.oracle.pinned_arm.astype(jnp.int32), (padded,))
-        reg, rb, counts, comp, min_prob = call(
+        reg, rb, counts, comp, min_prob = launch(
             jnp.asarray(segs), kd_env[:, 0], kd_env[:, 1], kd_agent[:, 0], kd_agent[:, 1],
             means, inv_alpha, pinned_arm)
         ok = alpha >= amin
@@ -406,5 +438,5 @@ def make_pallas_run(
                              min_prob=poison(min_prob), diag=None)
 
     fn.info = {"seeds_per_program": big_b, "num_warps": int(num_warps), "block": block,
-               "rebase": rebase_mode, "interpret": interpret}  # how it was built (records)
+               "rebase": rebase, "interpret": interpret}  # how it was built (records)
     return fn

@@ -20,8 +20,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
-import shutil
 import time
 from pathlib import Path
 
@@ -139,10 +137,94 @@ def _check(exp: NeuralRegretExperiment) -> None:
     if exp.nl_sigma2 not in neural_linear.SIGMA2_MODES:
         raise ValueError(f"--nl-sigma2 must be one of {', '.join(neural_linear.SIGMA2_MODES)}, "
                          f"got {exp.nl_sigma2!r}")
+    if not 0.0 <= exp.epsilon <= 1.0:
+        raise ValueError(f"--epsilon must lie in [0, 1], got {exp.epsilon!r}")
+    if exp.problem == "wheel" and not 0.0 < exp.delta < 1.0:
+        raise ValueError(f"--delta must lie in (0, 1), got {exp.delta!r}")
+    if exp.problem == "finite" and not 0.0 < exp.gap < 1.0:
+        raise ValueError(f"--gap must lie in (0, 1), got {exp.gap!r}")
+    from sern_jax.infra import validate
+
+    for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p)):
+        validate.finite_float(value, flag, float32_normal=True)  # the learners' float32
+    _tab.check_integer("--arms", exp.num_arms, 2, MAX_ARMS)
+    _tab.check_integer("--contexts", exp.num_contexts, 1, MAX_CONTEXTS)
+    _tab.check_integer("--context-dim", exp.context_dim, 1, MAX_CONTEXT_DIM)
     if exp.schedule != "constant":
         raise ValueError(f"--schedule applies to the tabular estimators; with --estimator "
                          f"neural use --policies sern (fixed --alpha) or sern_log "
                          f"(α = --alpha/ln(T^--p)), got --schedule {exp.schedule!r}")
+
+
+# Sizes beyond any useful neural run (the network scores every arm each round): refused up
+# front with the flag named, before the budget below is even estimated.
+MAX_ARMS = 4096
+MAX_CONTEXTS = 2**24
+MAX_CONTEXT_DIM = 65_536
+_MAX_DAYS = 7.0  # refuse runs estimated to take longer than this
+_FLOPS = 2.0e9  # a conservative single-core float32 rate, for the up-front time estimate
+
+
+def estimate(exp: NeuralRegretExperiment) -> dict:
+    """Up-front memory, disk and time of the run from the flags alone (no trace, no
+    compile): the problem's tables, each seed's network, optimiser state and replay buffer
+    (inputs are a context and a one-hot arm), the saved curves, and the network's forward
+    passes (every arm, every round) and fitting steps."""
+    d, k, m = exp.context_dim, exp.num_arms, exp.num_contexts
+    if exp.problem == "wheel":
+        d, k, m = 2, 5, 1
+    width = d + k  # the network's input: context ⊕ one-hot arm
+    layers = [width, *exp.hidden, 1]
+    params = sum(a * b + b for a, b in zip(layers[:-1], layers[1:]))
+    last = exp.hidden[-1] if exp.hidden else 1
+    problem_floats = m * (k + d) if exp.problem == "finite" else k * d
+    per_seed = (4 * params  # parameters, two Adam moments, a gradient
+                + exp.horizon * (width + 2)  # replay buffer
+                + k * (last + 1) ** 2 * 2  # Neural-Linear posteriors (precision, covariance)
+                + exp.batch_size * sum(layers)  # activations of a fitting step
+                + k * sum(layers))  # activations of scoring every arm
+    chunk = min(exp.chunk_size, exp.num_seeds)
+    memory = 4 * (problem_floats + 2 * chunk * per_seed)
+    saved = exp.num_seeds * len(exp.policies) * exp.num_checkpoints * (len(FIELDS) + k) * 4
+    flops = exp.num_seeds * len(exp.policies) * (
+        exp.horizon * k * 2 * params
+        + (exp.horizon // max(exp.update_every, 1)) * exp.fit_steps * exp.batch_size * 6
+        * params)
+    return {"memory_bytes": memory + 2 * saved, "disk_bytes": 2 * saved,
+            "seconds": flops / _FLOPS}
+
+
+def check_fits(exp: NeuralRegretExperiment, out_dir: Path | None = None) -> dict:
+    """Refuses (``ValueError`` naming the flags) a run whose :func:`estimate` exceeds this
+    machine's available memory, the free disk under ``out_dir`` or a week: before any
+    array is made or anything compiles."""
+    import shutil
+
+    from sern_jax.engine import drive
+
+    est = estimate(exp)
+    avail = drive.available_memory_bytes()
+    sizes = (f"--arms {exp.num_arms}, --contexts {exp.num_contexts}, --context-dim "
+             f"{exp.context_dim}, --hidden {','.join(map(str, exp.hidden))}, --horizon "
+             f"{exp.horizon}, --chunk-size {min(exp.chunk_size, exp.num_seeds)}")
+    if est["memory_bytes"] > avail:
+        raise ValueError(f"{sizes} needs about {io.fmt_bytes(est['memory_bytes'])} of memory, "
+                         f"more than the {io.fmt_bytes(avail)} available; use smaller sizes")
+    if out_dir is not None:
+        probe = Path(out_dir)
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        free = shutil.disk_usage(probe).free
+        if est["disk_bytes"] > free:
+            raise ValueError(f"the run needs up to {io.fmt_bytes(est['disk_bytes'])} of disk "
+                             f"under --out {out_dir}, more than the {io.fmt_bytes(free)} free; "
+                             "use fewer --seeds, --checkpoints or --arms")
+    if est["seconds"] > _MAX_DAYS * 86400:
+        raise ValueError(f"--seeds {exp.num_seeds} x --horizon {exp.horizon} x "
+                         f"{len(exp.policies)} policies with {sizes} is estimated at "
+                         f"{io.fmt_time(est['seconds'])}, over the {_MAX_DAYS:g}-day limit; use "
+                         "smaller sizes")
+    return est
 
 
 def _hyper(exp: NeuralRegretExperiment) -> dict:
@@ -161,6 +243,7 @@ def build_runs(exp: NeuralRegretExperiment):
     from sern_jax.learners import base, registry
 
     _check(exp)
+    check_fits(exp)
     problem = cp.make_problem(exp.problem, delta=exp.delta, num_arms=exp.num_arms,
                               num_contexts=exp.num_contexts, gap=exp.gap,
                               context_dim=exp.context_dim, seed=exp.seed)
@@ -208,22 +291,18 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
         params = problem.params
     else:
         runs, problem, cfg = build_runs(exp)
+    est = check_fits(exp, run_dir)
+    if est["seconds"] > 60 and progress:
+        log(f"estimated run time ~{io.fmt_time(est['seconds'])} at most "
+            f"({io.fmt_bytes(est['memory_bytes'])} of memory)")
     _check_run_dir(exp, run_dir)
-    probe = run_dir
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK):
-        raise ValueError(f"--out {run_dir}: cannot create the run directory there")
-    created = not run_dir.exists()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        with io.run_lock(run_dir):
-            return _run(exp, runs, problem, cfg, run_dir, progress, log, params)
-    except Exception:
-        chunk_dir = run_dir / "chunks"
-        if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
-            shutil.rmtree(run_dir, ignore_errors=True)
-        raise
+    from sern_jax.infra import validate
+
+    validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind
+    # created and locked in one step; a directory this run created is removed again, under
+    # the lock, when it fails before saving any seeds
+    with io.run_lock(run_dir, remove_unused=_tab.no_chunks_saved):
+        return _run(exp, runs, problem, cfg, run_dir, progress, log, params)
 
 
 def _run(exp, runs, problem, cfg, run_dir: Path, progress: bool, log=print,

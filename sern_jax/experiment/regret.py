@@ -124,6 +124,12 @@ def _check_cli_values(exp: RegretExperiment) -> None:
             raise ValueError(f"{flag} must be a finite number, got {value!r}")
     if exp.alpha0 <= 0:
         raise ValueError(f"--alpha must be > 0, got {exp.alpha0!r}")
+    if not exp.float64:  # the run's float32 must hold them (1e300 would become inf)
+        from sern_jax.infra import validate
+
+        for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p)):
+            validate.finite_float(value, flag, float32_normal=True)
+    _check_means(exp)
     if not 0.0 <= exp.epsilon <= 1.0:
         raise ValueError(f"--epsilon must lie in [0, 1], got {exp.epsilon!r}")
     if exp.num_contexts > 1:
@@ -140,7 +146,9 @@ def _check_cli_values(exp: RegretExperiment) -> None:
             and (exp.schedule == "constant" or exp.horizon >= 2):
         from sern_jax.core import schedules
 
-        with np.errstate(all="ignore"):
+        from sern_jax.infra import validate
+
+        with validate.quiet_numerics():
             alpha = float(schedules.alpha_of_horizon(exp.schedule, exp.horizon, exp.alpha0,
                                                      exp.p))
         tiny = float(np.finfo(dtype).tiny)
@@ -150,6 +158,23 @@ def _check_cli_values(exp: RegretExperiment) -> None:
                 f"--alpha {exp.alpha0!r} gives the softmax temperature α(T) = {alpha:.3g}, "
                 f"below the smallest normal {dtype} ({tiny:.3g}); {hint}the greedy policy "
                 f"(the α → 0 limit)")
+
+
+def _check_means(exp: RegretExperiment) -> None:
+    """``--means``: 'linspace', 'random' or a comma list of K probabilities in [0, 1] (no
+    empty item, no NaN), naming the flag."""
+    if exp.means in ("linspace", "random") or exp.num_contexts > 1:
+        return
+    from sern_jax.infra import validate
+
+    values = validate.comma_list_of(exp.means, "--means", float,
+                                    "numbers (or 'linspace' or 'random')", unique=False)
+    for v in values:
+        if not 0.0 <= v <= 1.0:  # NaN fails too
+            raise ValueError(f"--means: every success probability must lie in [0, 1], got "
+                             f"{v!r}")
+    if len(values) != exp.num_arms:
+        raise ValueError(f"--means has {len(values)} values but --arms is {exp.num_arms}")
 
 
 def _estimate(exp: RegretExperiment, triples) -> dict:
@@ -320,23 +345,19 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
         if est["seconds"] > 60 and progress:
             log(f"estimated run time ~{io.fmt_time(est['seconds'])} "
                 f"({io.fmt_bytes(est['memory_bytes'])} of results)")
-        created = not run_dir.exists()
-        try:
-            run_dir.mkdir(parents=True, exist_ok=True)
-            probe = run_dir / f".write-test-{os.getpid()}"
-            probe.write_bytes(b"")
-            probe.unlink()
-        except OSError as exc:
-            raise ValueError(f"--out {run_dir}: cannot write there ({exc.strerror or exc})") \
-                from None
-        try:
-            with io.run_lock(run_dir):  # one writer per run directory (issue 16)
-                return _run(exp, triples, run_dir, mesh, progress, log, ray)
-        except Exception:
-            chunk_dir = run_dir / "chunks"
-            if created and not (chunk_dir.is_dir() and any(chunk_dir.iterdir())):
-                shutil.rmtree(run_dir, ignore_errors=True)
-            raise
+        from sern_jax.infra import validate
+
+        validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind
+        # created and locked in one step; a directory this run created is removed again,
+        # under the lock, when it fails before saving any seeds (one writer per run directory)
+        with io.run_lock(run_dir, remove_unused=no_chunks_saved):
+            return _run(exp, triples, run_dir, mesh, progress, log, ray)
+
+
+def no_chunks_saved(run_dir: Path) -> bool:
+    """True when ``run_dir/chunks`` holds nothing (a run that saved no seeds)."""
+    chunk_dir = run_dir / "chunks"
+    return not (chunk_dir.is_dir() and any(chunk_dir.iterdir()))
 
 
 def compute_chunk(exp: RegretExperiment, policy: str, start: int, stop: int, per_call: int,

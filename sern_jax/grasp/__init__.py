@@ -7,7 +7,8 @@ that importing the package stays cheap:
   resting pose, ``depth`` image, ``candidates``) -> ``sim`` trials (``GraspSimulator``, or
   ``make_execute`` to vmap);
 * ``model``: crops, the quality network, D0, θ0 and the shipped artifacts;
-* ``online``: Algorithm 1 over objects x learners x seeds (``runner``), the ask/tell loop.
+* ``online``: Algorithm 1 over objects x learners x seeds (``step``, ``driver``), the
+  ask/tell loop.
 
 Importing this package imports mujoco with OpenGL disabled (``MUJOCO_GL=disable`` for the
 import, the user's value restored after): MuJoCo reads ``MUJOCO_GL`` at import, and a backend

@@ -16,8 +16,9 @@ command spreads over every core of a machine or over a cluster (issue 20):
   died ``max_retries + 1`` times) cancels the others and raises :class:`UnitFailedError`:
   one line naming the unit and the error. Finished units are on disk and are kept.
 * JAX in workers: every task gets environment variables set before its worker imports jax:
-  ``JAX_COMPILATION_CACHE_DIR`` (a persistent compilation cache, by default
-  ``<run dir>/.jax_cache``, so a program compiles once per cluster, not once per worker),
+  ``JAX_COMPILATION_CACHE_DIR`` (a persistent compilation cache, by default this user's
+  ``~/.cache/sern_jax/jax``, created private: never inside a run directory, whose files may
+  come from elsewhere, so that resuming a run directory never loads compiled code it holds),
   the CPU threads per task (``XLA_FLAGS`` intra-op threads, ``OMP_NUM_THREADS``, and
   ``SERN_CPU_THREADS``, which :func:`sern_jax.engine.drive.host_workers` honours; a CPU task
   also pins its worker process to as many cores of its own: :func:`_pin_cores`), and
@@ -30,6 +31,12 @@ the same unit (a retry after a lost reply) write the same bytes.
 
 Ray stays optional: importing this module does not import ray; :func:`require_ray` does, and
 turns a missing installation into one line naming ``--ray`` and the ``[ray]`` extra.
+
+``--ray ADDRESS`` is tried before anything is written: :func:`from_args` opens a TCP
+connection to the address with a bound of :data:`CONNECT_TIMEOUT_S` seconds and refuses an
+address nobody answers at in one line naming ``--ray``. The local Ray that ``--ray`` starts
+binds to loopback (``127.0.0.1``), and Ray's own log lines stay out of the terminal (errors
+only).
 
 Security: Ray 2.60 turns token authentication on by default. Keep it on, and never expose a
 head node's ports: anyone who reaches an open Ray head can run code on every node
@@ -63,7 +70,8 @@ __all__ = [
 
 LOCAL = "local"  # --ray without an address: start a Ray on this machine
 EXTRA = "pip install -e '.[ray]'"
-_CACHE_DIR = ".jax_cache"
+CONNECT_TIMEOUT_S = 10.0  # --ray ADDRESS: seconds the address has to answer
+LOOPBACK = "127.0.0.1"  # the local Ray's address: reachable from this machine only
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +88,8 @@ class RayConfig:
       gpus_per_task: GPUs Ray reserves per task (0: the task runs JAX on the CPU).
       max_retries: how often Ray reruns a task whose worker died (killed, out of memory).
       spread: Ray's SPREAD scheduling (tasks spread over nodes rather than packed).
-      cache_dir: JAX's persistent compilation cache; None: ``<run dir>/.jax_cache``.
+      cache_dir: JAX's persistent compilation cache; None: this user's private
+        ``~/.cache/sern_jax/jax`` (:func:`default_cache_dir`), never a run directory.
       pin_cores: CPU tasks pin their worker process to ``cpus_per_task`` cores of their own
         (claimed per node by file locks), so that JAX's and XLA's threads of one task do not
         spread over the cores other tasks run on.
@@ -139,20 +148,26 @@ class UnitFailedError(RuntimeError):
 
 def add_arguments(parser, *, gpus_default: float = 0.0) -> None:
     """Adds ``--ray [ADDRESS]`` and its companions to an argparse parser."""
+    from sern_jax.infra import validate
+
     parser.add_argument(
         "--ray", nargs="?", const=LOCAL, default=None, metavar="ADDRESS",
+        type=validate.ray_address,
         help="run the units of work as Ray tasks (needs the [ray] extra: "
-             f"{EXTRA}); no ADDRESS starts a local Ray, 'auto' joins the cluster started on "
-             "this machine with `ray start`, host:port another one; same run directory and "
-             "results as without --ray")
-    parser.add_argument("--ray-workers", type=int, default=None, metavar="N",
+             f"{EXTRA}); no ADDRESS starts a local Ray (bound to loopback), 'auto' joins the "
+             "cluster started on this machine with `ray start`, host:port another one; an "
+             f"address that does not answer within {CONNECT_TIMEOUT_S:g} s is refused before "
+             "anything is written; same run directory and results as without --ray")
+    parser.add_argument("--ray-workers", type=validate.int_in(1, 1_000_000), default=None,
+                        metavar="N",
                         help="with --ray and no address: concurrent tasks of the local Ray "
                              "(default: every core)")
-    parser.add_argument("--ray-cpus", type=int, default=1, metavar="N",
+    parser.add_argument("--ray-cpus", type=validate.int_in(1, 4096), default=1, metavar="N",
                         help="with --ray: CPUs (and JAX CPU threads) per task")
-    parser.add_argument("--ray-gpus", type=float, default=gpus_default, metavar="G",
+    parser.add_argument("--ray-gpus", type=validate.float_in(0.0, 64.0), default=gpus_default,
+                        metavar="G",
                         help="with --ray: GPUs per task (0: tasks compute on the CPU)")
-    parser.add_argument("--ray-retries", type=int, default=3, metavar="N",
+    parser.add_argument("--ray-retries", type=validate.int_in(0, 1000), default=3, metavar="N",
                         help="with --ray: reruns of a task whose worker died")
 
 
@@ -175,8 +190,60 @@ def from_args(args) -> RayConfig | None:
                        cpus_per_task=getattr(args, "ray_cpus", 1),
                        gpus_per_task=float(getattr(args, "ray_gpus", 0.0)),
                        max_retries=getattr(args, "ray_retries", 3))
-    require_ray()
+    ray = require_ray()
+    if config.address != LOCAL and not ray.is_initialized():
+        probe(ray, config.address)
     return config
+
+
+def probe(ray, address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Refuses (``ValueError``, one line naming ``--ray``) an address where nothing answers
+    within ``timeout`` seconds: a TCP connection to the cluster's address (``auto``: the one
+    ``ray start`` recorded on this machine), so that a typo fails in seconds, before anything
+    is written, instead of Ray retrying for minutes."""
+    import socket
+
+    target = address
+    if address == "auto":
+        try:
+            from ray._private import services
+
+            with _quiet_ray_logs():
+                target = services.canonicalize_bootstrap_address(address)
+        except Exception as exc:  # noqa: BLE001 - any failure to find it is one line
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise ValueError(f"--ray {address}: cannot join a Ray cluster there "
+                             f"({_one_line(first, 160)}); start one with `ray start --head` "
+                             "or give its host:port") from None
+        if not target:
+            raise ValueError(f"--ray {address}: cannot join a Ray cluster there (none is "
+                             "running on this machine); start one with `ray start --head`")
+    host, _, port = target.removeprefix("ray://").rpartition(":")
+    host = host.strip("[]")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            pass
+    except (OSError, ValueError) as exc:
+        reason = ("no answer" if isinstance(exc, TimeoutError)
+                  else getattr(exc, "strerror", None) or str(exc) or type(exc).__name__)
+        raise ValueError(f"--ray {address}: cannot join a Ray cluster there ({reason} within "
+                         f"{timeout:g} s); check the host and port, that the cluster runs "
+                         "and that this machine may reach it") from None
+
+
+@contextlib.contextmanager
+def _quiet_ray_logs():
+    """Ray's loggers at ERROR while the block runs (its warnings would add lines to a
+    one-line error)."""
+    loggers = [logging.getLogger(name) for name in ("ray", "ray._private")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
 
 
 def check_backend(backend: str, config: RayConfig | None) -> None:
@@ -212,8 +279,13 @@ def _xla_flags(existing: str, threads: int) -> str:
 def worker_env(config: RayConfig, run_dir: str | os.PathLike) -> dict[str, str]:
     """Environment variables of every task (set before the worker imports jax)."""
     threads = int(config.cpus_per_task)
-    cache = config.cache_dir or os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(
-        Path(run_dir).resolve() / _CACHE_DIR)
+    cache = config.cache_dir or os.environ.get("JAX_COMPILATION_CACHE_DIR") or \
+        default_cache_dir()
+    run = Path(run_dir).resolve()
+    if Path(cache).resolve() == run or run in Path(cache).resolve().parents:
+        raise ValueError(f"--ray: the compilation cache {cache} lies inside the run directory "
+                         f"{run_dir}; a run directory's files may come from elsewhere, so "
+                         "keep the cache outside it (JAX_COMPILATION_CACHE_DIR)")
     env = {
         "SERN_CPU_THREADS": str(threads),
         "OMP_NUM_THREADS": str(threads),
@@ -236,33 +308,63 @@ def worker_env(config: RayConfig, run_dir: str | os.PathLike) -> dict[str, str]:
     return env
 
 
+def default_cache_dir() -> str:
+    """This user's JAX compilation cache for Ray tasks: ``$XDG_CACHE_HOME/sern_jax/jax`` (or
+    ``~/.cache/sern_jax/jax``), outside every run directory; created with mode 0700."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    path = Path(base) / "sern_jax" / "jax"
+    with contextlib.suppress(OSError):
+        path.mkdir(parents=True, exist_ok=True, mode=0o700)
+    return str(path)
+
+
+def private_dir(name: str) -> Path | None:
+    """``<tmp>/<name>-<uid>``, this user's private directory: created with mode 0700, or
+    accepted when it is a real directory (not a symlink) owned by this user and closed to
+    others; None otherwise (a directory another user planted there is never used)."""
+    import stat
+    import tempfile
+
+    path = Path(tempfile.gettempdir()) / f"{name}-{os.getuid()}"
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass  # checked below: ours, a real directory, closed to others
+    except OSError:
+        return None
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return None
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
+        return None
+    return path
+
+
 _PIN: dict[str, Any] = {}  # this worker process's claimed cores (lock fds, cores)
 
 
 def _pin_cores(threads: int) -> list[int] | None:
     """Pins this worker process (every thread it has, and so the threads they start) to
-    ``threads`` cores no other pinned worker of this node holds, claimed by an exclusive
-    ``flock`` on ``<tmp>/sern-ray-cores/core-<i>`` for the life of the process (the kernel
-    releases it when the process dies). Called before the unit's first JAX call, so XLA's CPU
+    ``threads`` cores no other pinned worker of this user on this node holds, claimed by an
+    exclusive ``flock`` on ``<tmp>/sern-ray-cores-<uid>/core-<i>`` (:func:`private_dir`:
+    this user's, mode 0700, never a planted symlink; the files are opened with
+    ``O_NOFOLLOW``) for the life of the process (the kernel releases it when it dies). Called before the unit's first JAX call, so XLA's CPU
     thread pool is sized to the claimed cores. None (unpinned) when too few cores are free."""
     if "cores" in _PIN:
         return _PIN["cores"]
     import fcntl
-    import tempfile
 
-    lock_dir = Path(tempfile.gettempdir()) / "sern-ray-cores"
+    lock_dir = private_dir("sern-ray-cores")
     fds, cores = [], []
     try:
-        lock_dir.mkdir(exist_ok=True)
-        with contextlib.suppress(OSError):
-            os.chmod(lock_dir, 0o1777)  # other users' workers claim cores here too
-        candidates = sorted(os.sched_getaffinity(0))
+        candidates = [] if lock_dir is None else sorted(os.sched_getaffinity(0))
     except OSError:  # no usable lock directory: run unpinned
         candidates = []
     for core in candidates:
         try:
-            fd = os.open(lock_dir / f"core-{core}", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC,
-                         0o666)
+            fd = os.open(lock_dir / f"core-{core}",
+                         os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o600)
         except OSError:
             continue
         try:
@@ -330,11 +432,12 @@ def _init(ray, config: RayConfig) -> bool:
     """Connects to (or starts) Ray; True when this call started it (and must stop it)."""
     if ray.is_initialized():
         return False
-    kwargs: dict[str, Any] = dict(logging_level=logging.WARNING, log_to_driver=True,
+    kwargs: dict[str, Any] = dict(logging_level=logging.ERROR, log_to_driver=True,
                                   configure_logging=True)
     if config.address == LOCAL:
         cpus = None if config.workers is None else config.workers * config.cpus_per_task
-        ray.init(address="local", num_cpus=cpus, include_dashboard=False, **kwargs)
+        ray.init(address="local", num_cpus=cpus, include_dashboard=False,
+                 _node_ip_address=LOOPBACK, **kwargs)
     else:
         try:
             ray.init(address=config.address, **kwargs)

@@ -36,6 +36,7 @@ import hashlib
 import json
 import os
 import platform
+import shutil
 import socket
 import struct
 import subprocess
@@ -52,6 +53,7 @@ import numpy as np
 __all__ = [
     "DIGEST_KEY",
     "LOCK_FILE",
+    "refuse_if_locked",
     "DamagedFileError",
     "RunLockedError",
     "check_run_dir",
@@ -389,12 +391,17 @@ def _holder_text(lock_path: Path) -> str:
 
 
 @contextlib.contextmanager
-def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Iterator[Path]:
+def run_lock(run_dir: str | os.PathLike, *, command: str | None = None,
+             remove_unused: Callable[[Path], bool] | None = None) -> Iterator[Path]:
     """Holds the exclusive lock of a run directory while the block runs.
 
-    Creates ``run_dir`` (and parents) if needed, then takes a non-blocking ``flock`` on
-    ``run_dir/.sern.lock`` and writes the holder (pid, host, UTC start time, command line)
-    into it. Released on exit, and by the kernel if the process dies (no stale locks).
+    Creates ``run_dir`` (and parents) if needed and takes a non-blocking ``flock`` on
+    ``run_dir/.sern.lock`` in one step, then writes the holder (pid, host, UTC start time,
+    command line) into it. Released on exit, and by the kernel if the process dies (no stale
+    locks). After the ``flock`` the lock file must still be the one at its path (same device
+    and inode): a directory removed by its holder between this process's ``open`` and its
+    ``flock`` is created again and locked anew, so two processes never hold two locks of one
+    path.
 
     Call it after validating the inputs (it creates the directory); re-read anything another
     process could have written (config.json, checkpoints) after entering, under the lock.
@@ -404,6 +411,11 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
     Args:
       run_dir: the run directory.
       command: shown to a second process (default: this process's command line).
+      remove_unused: when this call created ``run_dir`` (its ``mkdir`` made it) and the block
+        raises, ``remove_unused(run_dir)`` is asked, still under the lock, whether nothing
+        worth keeping was written; if so the directory is removed before the lock is
+        released. A process that did not create the directory, or never held its lock,
+        never removes it.
 
     Yields:
       ``run_dir`` as a Path.
@@ -414,7 +426,6 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
     import fcntl
 
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     key = os.path.realpath(run_dir)
     if _HELD.get(key):
         _HELD[key] += 1
@@ -424,19 +435,44 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
             _HELD[key] -= 1
         return
     lock_path = run_dir / LOCK_FILE
-    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
-    try:
+    for _ in range(100):  # a lost race with a holder that removed the directory: retry
+        created = False
+        try:
+            run_dir.mkdir(parents=True)
+            created = True
+        except FileExistsError:
+            if not run_dir.is_dir():
+                raise
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW,
+                         0o666)
+        except FileNotFoundError:  # removed between the mkdir and the open
+            continue
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
+            os.close(fd)
             raise RunLockedError(
                 f"{run_dir} is in use by {_holder_text(lock_path)}; wait for that run to "
                 "finish (or stop it), then rerun; a killed run's lock is released by itself"
             ) from None
         except OSError as exc:
+            os.close(fd)
             raise RunLockedError(
                 f"{run_dir}: this filesystem refuses file locks ({exc.strerror or exc}); "
                 "use a run directory on a local or lock-capable filesystem") from None
+        held = os.fstat(fd)
+        try:
+            now = os.stat(lock_path, follow_symlinks=False)
+        except FileNotFoundError:
+            now = None
+        if now is not None and (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino):
+            break
+        os.close(fd)  # we locked a file its holder had removed: start again
+    else:
+        raise RunLockedError(f"{run_dir} keeps being removed while this run tries to lock it; "
+                             "rerun when no other run uses it")
+    try:
         info = {"pid": os.getpid(), "host": socket.gethostname(),
                 "started": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                 "command": command if command is not None else " ".join(
@@ -446,6 +482,14 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
         _HELD[key] = 1
         try:
             yield run_dir
+        except BaseException:
+            if created and remove_unused is not None:
+                with contextlib.suppress(OSError):
+                    if remove_unused(run_dir):
+                        # removed while the lock is held: a process that opened the lock
+                        # file meanwhile finds it gone after its flock and starts again
+                        shutil.rmtree(run_dir, ignore_errors=True)
+            raise
         finally:
             _HELD.pop(key, None)
             # the file stays (unlinking it would let two processes lock two inodes); emptied
@@ -454,6 +498,34 @@ def run_lock(run_dir: str | os.PathLike, *, command: str | None = None) -> Itera
                 os.ftruncate(fd, 0)
     finally:
         os.close(fd)  # releases the flock
+
+
+def refuse_if_locked(run_dir: str | os.PathLike | None) -> None:
+    """``RunLockedError`` (one line naming the holder) when a live process holds
+    ``run_dir``'s lock now: the cheap early check a command makes before its heavy imports
+    and compiles (the lock itself is still taken later, by :func:`run_lock`). Writes
+    nothing: the lock file is opened read-only and only if it exists."""
+    import fcntl
+
+    if run_dir is None:
+        return
+    lock_path = Path(run_dir) / LOCK_FILE
+    if os.path.realpath(Path(run_dir)) in _HELD:
+        return
+    try:
+        fd = os.open(lock_path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
+    except OSError:
+        return  # no lock file (or none readable): nobody to wait for
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise RunLockedError(
+            f"{run_dir} is in use by {_holder_text(lock_path)}; wait for that run to finish "
+            "(or stop it), then rerun; a killed run's lock is released by itself") from None
+    except OSError:
+        pass  # a filesystem without locks: run_lock reports it
+    finally:
+        os.close(fd)
 
 
 def peak_rss_mb() -> float:

@@ -8,7 +8,7 @@ that asynchronous dispatch is not mistaken for speed. A round may hold several c
 (all its threads) are recorded beside wall seconds.
 
 Used by ``sern bench bandit`` (:mod:`sern_jax.bench.bandit`), ``sern bench grasp``
-(:mod:`sern_jax.bench.grasp`) and ``quality_net.benchmark``.
+(:mod:`sern_jax.bench.grasp`, its ``quality_net_benchmark`` too).
 """
 
 from __future__ import annotations

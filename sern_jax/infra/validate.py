@@ -15,8 +15,19 @@ written (the bad-input promise of README and DESIGN).
 * :func:`finite_float`: a float flag that must be finite and in range; ``float32_normal``
   refuses values that float32 cannot hold as a normal number (``--alpha 1e-300`` became 0 in
   float32, softmax returned NaN and SERN picked no grasp, with exit 0).
-* :func:`locked_run_dir`: the run directory's lock (``io.run_lock``), removing a directory it
-  created if the run fails before writing anything else.
+* Typed argparse ``type`` parsers (argparse turns their error into one line naming the flag,
+  exit 2, before anything is imported or compiled): :func:`int_in` (an integer in a range),
+  :func:`float_in` (a finite float in a range), :func:`comma_list` / :func:`comma_list_of`
+  (a comma list with no empty items and no duplicates), :func:`ray_address` (``auto``,
+  ``host:port`` or ``ray://host:port`` with a port in [1, 65535]).
+* :func:`refuse_unused`: a flag given in a mode where it has no effect is refused, naming
+  the flag and the mode (a flag that does nothing is a mistake the user wants to hear about).
+* :func:`read_json_object`: a JSON file the project reads, refused in one line naming the
+  file when it is unreadable or not an object with the fields and types asked for.
+* :func:`quiet_numerics`: NumPy's floating-point warnings kept out of one-line errors.
+* :func:`locked_run_dir`: the run directory's lock (``io.run_lock``), created and locked in
+  one step; a directory this call created is removed again, under the lock, if the run fails
+  before writing anything else.
 """
 
 from __future__ import annotations
@@ -25,7 +36,6 @@ import argparse
 import contextlib
 import math
 import os
-import shutil
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -36,12 +46,20 @@ import numpy as np
 __all__ = [
     "FLOAT32_TINY",
     "OneLineParser",
+    "comma_list",
+    "comma_list_of",
     "finite_float",
     "float32_hyperparameters",
+    "float_in",
     "int_at_least",
+    "int_in",
     "locked_run_dir",
     "out_dir",
     "out_file",
+    "quiet_numerics",
+    "ray_address",
+    "read_json_object",
+    "refuse_unused",
     "script_parser",
 ]
 
@@ -81,21 +99,185 @@ def script_parser(spec=None, **kwargs) -> OneLineParser:
     return OneLineParser(**kwargs)
 
 
-def int_at_least(low: int):
-    """An argparse ``type``: an integer >= ``low``. A bad value is argparse's one-line error
-    naming the flag (``argument --seeds: must be >= 1, got -1``), raised while parsing."""
+def int_in(low: int, high: int | None = None):
+    """An argparse ``type``: an integer in [low, high] (no upper end when None). A bad value
+    is argparse's one-line error naming the flag (``argument --seeds: must be >= 1, got
+    -1``), raised while parsing."""
 
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = int(text.strip())
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        if value < low or (high is not None and value > high):
+            span = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"must be an integer {span}, got {value}")
         return value
 
-    parse.__name__ = f"integer >= {low}"
+    parse.__name__ = f"integer >= {low}" if high is None else f"integer in [{low}, {high}]"
     return parse
+
+
+def int_at_least(low: int):
+    """An argparse ``type``: an integer >= ``low`` (:func:`int_in` without an upper end)."""
+    return int_in(low)
+
+
+def float_in(low: float | None = None, high: float | None = None, *, low_open: bool = False,
+             high_open: bool = False, float32_normal: bool = False):
+    """An argparse ``type``: a finite float in the range (:func:`finite_float`'s checks).
+    ``--alpha nan``, ``--alpha 1e400``, ``--epsilon 2`` are argparse's one-line error
+    naming the flag."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        try:
+            return finite_float(value, "the value", low=low, high=high, low_open=low_open,
+                                high_open=high_open, float32_normal=float32_normal)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("the value ")) from None
+
+    parse.__name__ = "number"
+    return parse
+
+
+def comma_list(text: str, flag: str, *, unique: bool = True, allow_empty: bool = False,
+               choices=None) -> list[str]:
+    """The items of a comma list, stripped; ``ValueError`` naming ``flag`` for an empty
+    item (``0.5,,0.7``: a typo, never dropped silently), a duplicate, an empty list (unless
+    ``allow_empty``) or an item outside ``choices``."""
+    if not isinstance(text, str):
+        raise ValueError(f"{flag} must be a comma list, got {text!r}")  # noqa: TRY004
+    if not text.strip():
+        if allow_empty:
+            return []
+        raise ValueError(f"{flag} is empty; give a comma list")
+    items = [item.strip() for item in text.split(",")]
+    if any(not item for item in items):
+        raise ValueError(f"{flag} {text!r} has an empty item (two commas in a row, or a comma "
+                         "at an end)")
+    if unique:
+        seen = set()
+        for item in items:
+            if item in seen:
+                raise ValueError(f"{flag} {text!r} lists {item!r} twice")
+            seen.add(item)
+    if choices is not None:
+        for item in items:
+            if item not in choices:
+                raise ValueError(f"{flag}: unknown item {item!r}; choose from "
+                                 f"{', '.join(map(str, choices))}")
+    return items
+
+
+def comma_list_of(text: str, flag: str, convert, what: str, *, unique: bool = True,
+                  allow_empty: bool = False) -> list:
+    """:func:`comma_list` with each item converted by ``convert`` (``int``, ``float``):
+    ``ValueError`` naming ``flag`` and ``what`` (``"integers"``) for an item it refuses;
+    duplicates are compared after conversion (``0.5,0.50``)."""
+    items = comma_list(text, flag, unique=False, allow_empty=allow_empty)
+    try:
+        values = [convert(item) for item in items]
+    except (ValueError, OverflowError):
+        raise ValueError(f"{flag} must be a comma list of {what}, got {text!r}") from None
+    if unique and len(set(values)) != len(values):
+        raise ValueError(f"{flag} {text!r} lists a value twice")
+    return values
+
+
+def ray_address(text: str) -> str:
+    """An argparse ``type`` for ``--ray ADDRESS``: ``auto``, ``local``, ``host:port`` or
+    ``ray://host:port``, with a port in [1, 65535]; anything else is one line naming the
+    flag before Ray is imported."""
+    value = text.strip()
+    if value in ("auto", "local"):
+        return value
+    rest = value.removeprefix("ray://")
+    host, sep, port = rest.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or any(c.isspace() or c in "/@" for c in host):
+        raise argparse.ArgumentTypeError(
+            f"expected 'auto' or host:port (or ray://host:port), got {text!r}")
+    try:
+        number = int(port)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"the port of {text!r} is not a number") from None
+    if not 1 <= number <= 65535:
+        raise argparse.ArgumentTypeError(f"the port of {text!r} must lie in [1, 65535]")
+    return value
+
+
+def refuse_unused(args, defaults: dict, mode: str) -> None:
+    """Refuses every flag among ``defaults`` (argparse dest -> its default) whose value in
+    ``args`` differs from its default: in ``mode`` (``"with the tabular estimators"``) it has
+    no effect. One line naming the first such flag (``ValueError``)."""
+    for dest, default in defaults.items():
+        value = getattr(args, dest, default)
+        if value != default and not (isinstance(value, float) and isinstance(default, float)
+                                     and math.isnan(value) and math.isnan(default)):
+            raise ValueError(f"--{dest.replace('_', '-')} has no effect {mode}; leave it out")
+
+
+@contextlib.contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """NumPy's floating-point warnings (overflow, invalid) silenced: host-side checks turn
+    such values into one line naming the flag, so the warning would only add lines."""
+    import warnings
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
+_JSON_TYPES = {dict: "an object", list: "a list", str: "a string", int: "an integer",
+               float: "a number", bool: "true or false"}
+
+
+def read_json_object(path: str | os.PathLike, fields: dict | None = None, *,
+                     what: str = "file", advice: str = "delete it or point at another") -> dict:
+    """The JSON object in ``path``, checked against a schema.
+
+    ``fields`` maps a key to the type(s) its value must have (``(int, float)``, ``dict``,
+    ``type(None)``...); a key missing or of another type, a file that is not JSON or not a
+    JSON object, are one line naming the file (``ValueError``), never a traceback further on.
+    """
+    import json
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read this {what} ({exc.strerror or exc}); "
+                         f"{advice}") from None
+    except (ValueError, UnicodeDecodeError):
+        raise ValueError(f"{path} is not valid JSON (a damaged {what}); {advice}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} holds {_kind(data)}, not the JSON object a {what} holds; "
+                         f"{advice}")
+    for key, types in (fields or {}).items():
+        types = types if isinstance(types, tuple) else (types,)
+        if key not in data:
+            raise ValueError(f"{path} has no {key!r} field (a damaged {what}); {advice}")
+        value = data[key]
+        ok = isinstance(value, types) and not (isinstance(value, bool) and bool not in types)
+        if not ok:
+            want = " or ".join(_JSON_TYPES.get(t, "null" if t is type(None) else t.__name__)
+                               for t in types)
+            raise ValueError(f"{path}: {key!r} holds {_kind(value)}, not {want} (a damaged "
+                             f"{what}); {advice}")
+    return data
+
+
+def _kind(value) -> str:
+    if value is None:
+        return "null"
+    for t, name in _JSON_TYPES.items():
+        if type(value) is t:
+            return name
+    return type(value).__name__
 
 
 def finite_float(value: float, flag: str, *, low: float | None = None,
@@ -203,21 +385,22 @@ def out_file(path: str | os.PathLike | None, flag: str = "--json-out") -> None:
     _probe_write(probe, flag, path)
 
 
-@contextlib.contextmanager
-def locked_run_dir(path: str | os.PathLike, command: str | None = None) -> Iterator[Path]:
-    """``io.run_lock(path)``; if this call created the directory and the block fails before
-    anything but the lock file was written, the directory is removed again."""
+def _nothing_kept(path: Path) -> bool:
+    """Only the lock file and an empty ``figures/`` in ``path``."""
     from sern_jax.infra import io
 
-    path = Path(path)
-    created = not path.exists()
-    try:
-        with io.run_lock(path, command=command):
-            yield path
-    except BaseException:
-        if created and path.is_dir():
-            left = [c.name for c in path.iterdir() if c.name not in (io.LOCK_FILE, "figures")]
-            figures = path / "figures"
-            if not left and not (figures.is_dir() and any(figures.iterdir())):
-                shutil.rmtree(path, ignore_errors=True)
-        raise
+    left = [c.name for c in path.iterdir() if c.name not in (io.LOCK_FILE, "figures")]
+    figures = path / "figures"
+    return not left and not (figures.is_dir() and any(figures.iterdir()))
+
+
+@contextlib.contextmanager
+def locked_run_dir(path: str | os.PathLike, command: str | None = None) -> Iterator[Path]:
+    """``io.run_lock(path)``, which creates and locks the directory in one step; if that call
+    created it and the block fails before anything but the lock file (and an empty
+    ``figures/``) was written, the directory is removed again, under the lock. A directory
+    another process created or holds is never removed."""
+    from sern_jax.infra import io
+
+    with io.run_lock(path, command=command, remove_unused=_nothing_kept) as run_dir:
+        yield run_dir

@@ -58,9 +58,11 @@ __all__ = [
     "check_probability",
     "empty_buffer",
     "l1_loss",
+    "loss_function",
     "make_fit",
     "make_neural_init",
     "make_neural_update",
+    "make_train_step",
     "network_predict",
     "policy_act",
 ]
@@ -236,18 +238,41 @@ def _weighted_mean(values, weights):
 
 
 def bce_loss(logits, labels, weights=None):
-    """Weighted binary cross-entropy on logits: [N], [N], [N] -> [] (the default loss).
+    """Weighted binary cross-entropy on logits (the default loss).
 
-    A strictly proper scoring rule: its expectation is minimised by r̂ = P(reward = 1 | x).
-    ``sum(w * loss) / sum(w)``; 0 when every weight is 0.
+    BCE is a strictly proper scoring rule for Bernoulli outcomes: its expected value is
+    minimised by r̂ = P(reward = 1 | x), so the network estimates a success probability,
+    which the softmax policy and the theory (r̂ ∈ [0, 1] as an expected reward) need.
+    Computed stably from logits (``optax.sigmoid_binary_cross_entropy``).
+
+    Args:
+      logits: [N] network logits.
+      labels: [N] rewards in {0, 1} (or frequencies in [0, 1]).
+      weights: optional [N] >= 0 per-example weights (0 = padding).
+
+    Returns:
+      [] sum(w * loss) / sum(w) (0 when all weights are 0).
     """
     labels = jnp.asarray(labels, logits.dtype)
     return _weighted_mean(optax.sigmoid_binary_cross_entropy(logits, labels), weights)
 
 
 def l1_loss(logits, labels, weights=None):
-    """Weighted |R - sigmoid(logit)|: Algorithm 1's printed loss, a negative control (its
-    expectation is minimised by the conditional median, 0 or 1 for a Bernoulli reward)."""
+    """Weighted L1 loss |R - r̂| with r̂ = sigmoid(logit): the printed Algorithm 1's loss.
+
+    Kept as a negative control only. The expected L1 loss is minimised by the conditional
+    *median* of R, and the median of a Bernoulli(p) reward is 0 or 1 (1 iff p > 1/2), so
+    L1 drives r̂ towards 0/1 votes rather than the success probability p; its gradient is
+    also flat in the error size. BCE is the default for that reason.
+
+    Args:
+      logits: [N] network logits.
+      labels: [N] rewards in {0, 1}.
+      weights: optional [N] >= 0 per-example weights (0 = padding).
+
+    Returns:
+      [] sum(w * |R - r̂|) / sum(w).
+    """
     labels = jnp.asarray(labels, logits.dtype)
     return _weighted_mean(jnp.abs(labels - jax.nn.sigmoid(logits)), weights)
 
@@ -258,30 +283,59 @@ LOSSES = {"bce": bce_loss, "l1": l1_loss}
 # ----------------------------------------------------------------------------- training
 
 
-def make_fit(model: Model, optimizer: optax.GradientTransformation, loss="bce",
-             batch_size: int = 64, num_steps: int = 16):
-    """``num_steps`` minibatch optimiser steps in one ``lax.scan``: pure, jit- and vmap-able.
+def loss_function(loss) -> Callable:
+    """``loss`` as a function: a name of :data:`LOSSES` or a callable ``(logits, labels,
+    weights) -> []``; an unknown name is a ``ValueError``."""
+    if callable(loss):
+        return loss
+    if loss not in LOSSES:
+        raise ValueError(f"unknown loss {loss!r}; known: {sorted(LOSSES)}")
+    return LOSSES[loss]
 
-    Returns ``fit(key, params, opt_state, data: Data) -> (params, opt_state, mean_loss)``;
-    ``key`` is consumed. Each step draws ``batch_size`` rows with replacement with
-    probability ``weight / sum(weight)`` (inverse CDF: zero-weight rows are never drawn) and
-    takes one step on their unweighted mean loss. With all weights 0 nothing changes and
-    ``mean_loss`` is 0. ``opt_state`` is over ``model.trainable(params)``.
+
+def make_train_step(model: Model, optimizer: optax.GradientTransformation, loss="bce"):
+    """One optimiser step on a given minibatch.
+
+    Returns ``train_step(params, opt_state, inputs, labels, weights) -> (params, opt_state,
+    loss)``, pure: ``inputs`` a tuple of [B, ...] arrays (``model``'s), ``labels`` and
+    ``weights`` [B]; the loss is the minibatch's weighted mean before the update, and rows of
+    weight 0 contribute nothing. ``opt_state`` is over ``model.trainable(params)``.
     """
-    if not isinstance(batch_size, (int, np.integer)) or batch_size < 1:
-        raise ValueError(f"batch_size must be an int >= 1, got {batch_size!r}")
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
-    loss_fn = loss if callable(loss) else LOSSES[loss]
+    loss_fn = loss_function(loss)
 
-    def train_step(params, opt_state, inputs, label, weight):
+    def train_step(params, opt_state, inputs, labels, weights):
         def objective(trained):
-            return loss_fn(model.logits(model.merge(params, trained), *inputs), label, weight)
+            return loss_fn(model.logits(model.merge(params, trained), *inputs), labels, weights)
 
         trained = model.trainable(params)
         value, grads = jax.value_and_grad(objective)(trained)
         updates, opt_state = optimizer.update(grads, opt_state, trained)
         return model.merge(params, optax.apply_updates(trained, updates)), opt_state, value
+
+    return train_step
+
+
+def make_fit(model: Model, optimizer: optax.GradientTransformation, loss="bce",
+             batch_size: int = 64, num_steps: int = 16):
+    """``num_steps`` minibatch optimiser steps in one ``lax.scan``: pure, jit- and vmap-able.
+
+    The one weighted-minibatch fit: the learners' update and the quality network's training
+    (:func:`sern_jax.grasp.model.quality_net.make_fit`) both run it.
+
+    Returns ``fit(key, params, opt_state, data: Data) -> (params, opt_state, mean_loss)``;
+    ``key`` is consumed. Each step draws ``batch_size`` rows with replacement with
+    probability ``weight / sum(weight)`` (inverse CDF: zero-weight rows are never drawn) and
+    takes one step on their unweighted mean loss: in expectation the weighted-mean loss of
+    the data. ``mean_loss`` is the mean over steps of the minibatch loss before each update.
+    With all weights 0 nothing changes and ``mean_loss`` is 0. ``opt_state`` is over
+    ``model.trainable(params)``. vmap ``fit`` over (key, params, opt_state[, data]) to train
+    independent copies.
+    """
+    if not isinstance(batch_size, (int, np.integer)) or batch_size < 1:
+        raise ValueError(f"batch_size must be an int >= 1, got {batch_size!r}")
+    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
+    train_step = make_train_step(model, optimizer, loss)
 
     def fit(key: Key, params, opt_state, data: Data):
         n = data.weight.shape[0]

@@ -30,6 +30,7 @@ __all__ = [
     "EGreedyDecayConfig",
     "SernDecayConfig",
     "alpha_at",
+    "check_schedule",
     "egreedy_decay",
     "epsilon_at",
     "sern_decay",
@@ -88,13 +89,32 @@ def _make(model, train, probs_fn, scale0: float) -> base.Learner:
         predict=base.network_predict(model))
 
 
+def check_schedule(flag: str, scale0: float, horizon: int, kind: str) -> None:
+    """Every value the schedule takes over ``horizon`` decisions must be a normal float32,
+    the bound the flag itself gets (``--decay-alpha0 1.1754944e-38`` is one, but α_T =
+    α0/log2(1 + T) is not): its smallest value, at t = T (both schedules decrease in t),
+    checked on the host in float64 before anything compiles; ``ValueError`` naming
+    ``flag``."""
+    import math
+
+    t = max(int(horizon), 1)
+    last = scale0 / math.log2(1.0 + t) if kind == "alpha" else min(1.0, scale0 / t)
+    name = "α_T = α0/log2(1 + T)" if kind == "alpha" else "ε_T = min(1, ε0/T)"
+    if not last >= base.FLOAT32_TINY:
+        raise ValueError(f"{flag} {scale0:g} gives {name} = {last:.3g} at the last decision "
+                         f"(T = {t}), below float32's smallest normal "
+                         f"({base.FLOAT32_TINY:.8g}); use a larger {flag}")
+
+
 def egreedy_decay(model: base.Model, train: base.TrainConfig,
                   config: EGreedyDecayConfig = EGreedyDecayConfig()) -> base.Learner:
     """ε-greedy with ε_t = min(1, ε0/t)."""
+    check_schedule("--decay-epsilon0", config.decay_epsilon0, train.horizon, "epsilon")
     return _make(model, train, _egreedy, config.decay_epsilon0)
 
 
 def sern_decay(model: base.Model, train: base.TrainConfig,
                config: SernDecayConfig = SernDecayConfig()) -> base.Learner:
     """SERN with α_t = α0/log2(1 + t)."""
+    check_schedule("--decay-alpha0", config.decay_alpha0, train.horizon, "alpha")
     return _make(model, train, _softmax, config.decay_alpha0)

@@ -55,11 +55,12 @@ import numpy as np
 import optax
 
 from sern_jax.core import policies as pol
-from sern_jax.learners import base
 from sern_jax.core.types import Array, Key
+from sern_jax.learners import base
+from sern_jax.learners.neural_linear import ArmFeatures
 
 __all__ = ["BOOTSTRAPS", "HEADS", "EnsembleConfig", "EnsembleExtra", "Heads",
-           "SharedHeadsExtra", "bootstrap_weights", "ensemble_ts"]
+           "SharedHeadsExtra", "bootstrap_weights", "ensemble_ts", "head_features"]
 
 BOOTSTRAPS = ("bernoulli", "poisson")
 HEADS = ("networks", "shared")
@@ -126,6 +127,19 @@ def bootstrap_weights(key: Key, num_members: int, num_rows: int, kind: str,
     if kind == "poisson":
         return jax.random.poisson(key, 1.0, (num_members, num_rows)).astype(jnp.float32)
     raise ValueError(f"--bootstrap must be one of {', '.join(BOOTSTRAPS)}, got {kind!r}")
+
+
+def head_features(features) -> Array:
+    """What the shared layout's member heads read, [..., d]: ``model.features`` as they are,
+    or, for a network with one linear head per arm (:class:`ArmFeatures`: the trunk's φ
+    [..., h] and the arm's one-hot [..., G]), the block features onehot(arm) ⊗ φ
+    [..., G·h], so each member adds one linear head per arm on the trunk, as the network's
+    own heads are (a head on φ alone would add the same logit to every arm of a round)."""
+    if isinstance(features, ArmFeatures):
+        phi, arm = features.phi, jnp.asarray(features.arm, features.phi.dtype)
+        block = arm[..., :, None] * phi[..., None, :]  # [..., G, h]
+        return block.reshape(block.shape[:-2] + (-1,))
+    return features
 
 
 def ensemble_ts(model: base.Model, train: base.TrainConfig,
@@ -221,13 +235,13 @@ def _shared_heads(model: base.Model, train: base.TrainConfig,
     def member_logits(params, heads: Heads, inputs) -> Array:
         """[M, ...]: every member's logit on inputs with leading shape [...]."""
         logit = model.logits(params, *inputs)  # [...]
-        phi = model.features(params, *inputs)  # [..., d]
+        phi = head_features(model.features(params, *inputs))  # [..., d]
         b = jnp.reshape(heads.b, (num_m,) + (1,) * logit.ndim)
         return logit[None] + jnp.moveaxis(phi @ heads.w.T, -1, 0) + b
 
     def init(key: Key, theta0, core_set: base.Data) -> base.LearnerState:
         buffer = base.empty_buffer(core_set, train.horizon)
-        d = jax.eval_shape(model.features, theta0,
+        d = jax.eval_shape(lambda p, *x: head_features(model.features(p, *x)), theta0,
                            *(x[:1] for x in core_set.inputs)).shape[-1]
         heads = Heads(jnp.zeros((num_m, d), jnp.float32), jnp.zeros((num_m,), jnp.float32))
         weights = bootstrap_weights(key, num_m, buffer.weight.shape[0], config.bootstrap,

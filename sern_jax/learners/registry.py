@@ -3,7 +3,7 @@
 Each entry is a factory ``make(model, train, config) -> Learner`` and its hyperparameter
 dataclass, whose fields carry their CLI flag and help in ``metadata``; a hyperparameter
 shared by several learners (one name) is one flag. Adding a learner = one module in this
-folder + one line in ``LEARNERS`` (docs/LEARNING.md, "Add a learner").
+folder + one line in ``LEARNERS`` (docs/EXTENDING.md, "Add a learner").
 """
 
 from __future__ import annotations

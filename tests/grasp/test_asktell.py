@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from sern_jax.grasp.model import artifacts
-from sern_jax.grasp.online import asktell, runner
+from sern_jax.grasp.online import asktell, driver
+from sern_jax.grasp.online import config as online_config
+from sern_jax.grasp.online import keys as keys_lib
 from sern_jax.grasp.world import context, objects, sim
 from sern_jax.grasp.model import quality_net as qn
 from sern_jax.learners import registry
@@ -44,15 +46,15 @@ def test_ask_tell_matches_batched_run_for_every_other_learner(tmp_path, theta0):
 
 
 def _ask_tell_matches_batched(names, tmp_path, theta0):
-    config = runner.OnlineConfig(policies=names, num_seeds=1, rounds=2, explore=3,
+    config = online_config.OnlineConfig(policies=names, num_seeds=1, rounds=2, explore=3,
                                  evaluate=1, eval_poses=0, eval_trials=0, fit_steps=3,
                                  batch_size=8)
     spec = objects.make_object("triangular_prism")
-    res = runner.run(config, [spec], tmp_path / "batched", theta0=theta0, progress=False)
-    key_os = runner.object_key(jax.random.key(config.seed), spec.name, 0)
+    res = driver.run(config, [spec], tmp_path / "batched", theta0=theta0, progress=False)
+    key_os = keys_lib.object_key(jax.random.key(config.seed), spec.name, 0)
     model = context.scene_model(spec)
     simulator = sim.GraspSimulator(model, "native")
-    contexts = {r: context.make_contexts(runner._stream(key_os, runner.EXPLORE_CONTEXT, r),
+    contexts = {r: context.make_contexts(keys_lib.stream(key_os, keys_lib.EXPLORE_CONTEXT, r),
                                          spec, config.explore, model=model) for r in (1, 2)}
     for q, name in enumerate(names):
         batched = res["results"].explore_action[:, 0, q, 0]  # [R + 1, E]
@@ -60,7 +62,7 @@ def _ask_tell_matches_batched(names, tmp_path, theta0):
         state = learner.init()
         for r in (1, 2):
             ctx = contexts[r]
-            noise = sim.sample_noise(runner._stream(key_os, runner.EXPLORE_TRIAL, r),
+            noise = sim.sample_noise(keys_lib.stream(key_os, keys_lib.EXPLORE_TRIAL, r),
                                      config.explore, simulator.config)
             for j in range(config.explore):
                 grasp, state = learner.ask(state, ctx.depth[j])
@@ -85,7 +87,7 @@ def _ask_tell_matches_batched(names, tmp_path, theta0):
 
 
 def test_ask_tell_bad_use(theta0, tmp_path):
-    config = runner.OnlineConfig(policies=("sern",), num_seeds=1, rounds=1, explore=2,
+    config = online_config.OnlineConfig(policies=("sern",), num_seeds=1, rounds=1, explore=2,
                                  eval_poses=0, eval_trials=0)
     learner = asktell.AskTell(config, "sern", "x", 0, theta0)
     state = learner.init()

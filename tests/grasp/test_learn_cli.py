@@ -11,7 +11,8 @@ from sern_jax.infra import io
 from sern_jax.commands import grasp_learn as learn_cli
 from sern_jax.commands import reproduce
 from sern_jax.grasp.model import artifacts
-from sern_jax.grasp.online import runner as online
+from sern_jax.grasp.online import checkpoint
+from sern_jax.grasp.online import config as online_config
 
 
 def _paper_eval():
@@ -23,7 +24,7 @@ def _paper_eval():
 
 
 def test_table_rows_max_and_improvement():
-    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval())
+    rows = checkpoint.table_rows(["box"], ("sern", "greedy"), _paper_eval())
     sern, greedy = rows
     assert sern["theta0"] == pytest.approx(50.0)
     assert sern["rounds"] == pytest.approx([30.0, 60.0])
@@ -35,15 +36,15 @@ def test_table_rows_max_and_improvement():
     assert greedy["imprv"] is None  # r_1 = 0: undefined
     assert "lowvar_rounds" not in sern
     lowvar = np.full((3, 1, 2, 2), 0.5)
-    with_lv = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
+    with_lv = checkpoint.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
     assert with_lv[0]["lowvar_rounds"] == pytest.approx([50.0] * 3)
     # a NaN low-variance array (evaluation off) leaves the columns out
-    nan_lv = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar * np.nan)
+    nan_lv = checkpoint.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar * np.nan)
     assert "lowvar_rounds" not in nan_lv[0]
 
 
 def test_format_table():
-    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval())
+    rows = checkpoint.table_rows(["box"], ("sern", "greedy"), _paper_eval())
     text = learn_cli.format_table(rows)
     lines = text.splitlines()
     assert lines[0] == "| Obj. | Alg. | θ0 | Round 1 | Round 2 | Max. | Imprv. |"
@@ -60,7 +61,7 @@ def test_format_table():
 def test_format_table_with_lowvar():
     lowvar = np.zeros((3, 1, 2, 2))
     lowvar[:, 0, 0] = [[0.5, 0.7], [0.6, 0.6], [1.0, 0.8]]
-    rows = online.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
+    rows = checkpoint.table_rows(["box"], ("sern", "greedy"), _paper_eval(), lowvar)
     lines = learn_cli.format_table(rows).splitlines()
     i = lines.index("| Obj. | Alg. | R0 | R1 | R2 |")
     assert lines[i + 2] == "| box | sern | 60% (±10.0) | 60% (±0.0) | 90% (±10.0) |"
@@ -68,10 +69,10 @@ def test_format_table_with_lowvar():
 
 
 def test_write_learn_outputs(tmp_path, tiny_theta0):
-    config = online.OnlineConfig(policies=("sern", "greedy"), num_seeds=2, rounds=2)
+    config = online_config.OnlineConfig(policies=("sern", "greedy"), num_seeds=2, rounds=2)
     pe = _paper_eval()
-    results = online.RoundResults(pe, pe, pe, np.zeros(pe.shape + (3,), np.int32), pe)
-    table = online.table_rows(["box"], config.policies, pe, pe)
+    results = checkpoint.RoundResults(pe, pe, pe, np.zeros(pe.shape + (3,), np.int32), pe)
+    table = checkpoint.table_rows(["box"], config.policies, pe, pe)
     res = {"table": table, "results": results, "objects": ["box"], "fingerprint": "f" * 16,
            "config": config, "timings": {"contexts": 1.0, "choose": 3.0},
            "trial_counts": {"requested": 120, "simulated": 70}}
@@ -183,7 +184,7 @@ def test_reproduce_summary_leads_with_paired_t_intervals_and_holm(tmp_path):
 
 
 class _RunnerReached(Exception):
-    """Raised by the stand-in for runner.run: the command got past its run-directory check."""
+    """Raised by the stand-in for driver.run: the command got past its run-directory check."""
 
 
 def _learn(out, *extra):
@@ -204,18 +205,18 @@ def test_learn_run_dir_check_is_ios(tmp_path, monkeypatch, capsys):
     run, or a learn run whose checkpoint was removed) is refused in one line, exit 2, left
     byte-identical and the runner never starts; the same settings resume (the runner is
     reached); other settings are refused whichever file holds the fingerprint."""
-    from sern_jax.grasp.online import runner
+    from sern_jax.grasp.online import driver
 
     reached = []
 
     def fake_run(config, specs, out, theta0=None, **kw):
-        fp = runner.run_fingerprint(config, specs, theta0)
+        fp = online_config.run_fingerprint(config, specs, theta0)
         reached.append(fp)
         io.save_npz(out / "checkpoint.npz", fingerprint=np.str_(fp), next_round=np.int64(1))
         io.save_json(out / "config.json", {"fingerprint": fp})
         raise _RunnerReached
 
-    monkeypatch.setattr(runner, "run", fake_run)
+    monkeypatch.setattr(driver, "run", fake_run)
     other = tmp_path / "regret_run"  # another command's finished run: config.json only
     other.mkdir()
     io.save_json(other / "config.json", {"fingerprint": "0123456789abcdef"})

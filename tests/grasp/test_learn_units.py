@@ -5,7 +5,7 @@ slow tests)."""
 import numpy as np
 
 from sern_jax.infra import io
-from sern_jax.grasp.online import learn_units, runner
+from sern_jax.grasp.online import checkpoint, learn_units
 
 R, O, Q, S, E = 3, 2, 2, 3, 4  # rounds 0..2, objects, learners, seeds, grasps per phase
 
@@ -15,11 +15,11 @@ def _saved(next_round: int) -> dict:
     initial fill), with distinct values in every finished cell."""
     rng = np.random.default_rng(next_round)
     shape = (R + 1, O, Q, S)
-    results = runner.RoundResults(
+    results = checkpoint.RoundResults(
         rng.random(shape), rng.random(shape), rng.random(shape),
         rng.integers(0, 64, shape + (E,)).astype(np.int32), rng.random(shape))
     rewards = rng.integers(0, 2, (R + 1, O, S, Q, E)).astype(np.int8)
-    results, rewards = runner._through(results, rewards, next_round)
+    results, rewards = checkpoint.through(results, rewards, next_round)
     return {**results._asdict(), "explore_reward": rewards, "next_round": np.asarray(next_round),
             "fingerprint": np.asarray("f" * 16)}
 
@@ -37,7 +37,7 @@ def test_split_then_join_gives_the_run_back(tmp_path):
     assert units[1]["paper_eval"].shape == (R + 1, 1, Q, S)  # object axis 1, one object each
     results, rewards, next_round = learn_units._join(units)
     assert next_round == 2
-    for name in runner.RoundResults._fields:
+    for name in checkpoint.RoundResults._fields:
         assert _same(getattr(results, name), saved[name]), name
     assert _same(rewards, saved["explore_reward"])
 

@@ -1,9 +1,11 @@
-"""Tests for sern_jax.grasp.online.runner (Algorithm 1 for grasping, batched): a tiny end-to-end
-run equal bit for bit to the pre-refactor online.run, resume after an interrupt, common
-random numbers, SERN's choice law, learning from failures, a toy learner through the
-runner, a learner returning no grasp stopped, and bad input refused before anything
-compiles."""
+"""Tests for the batched online run, sern_jax.grasp.online.{driver,step,checkpoint,config}
+(Algorithm 1 for grasping): a tiny end-to-end run equal bit for bit to the pre-refactor
+online.run, the scheduling options changing nothing, one round's pure step functions called
+alone, resume after an interrupt, common random numbers, SERN's choice law, learning from
+failures, a toy learner through the run, a learner returning no grasp stopped, and bad input
+refused before anything compiles."""
 
+import concurrent.futures
 import dataclasses
 import shutil
 import subprocess
@@ -22,13 +24,14 @@ from sern_jax.core import policies as pol
 from sern_jax.commands import main as cli
 from sern_jax.grasp.model import artifacts
 from sern_jax.grasp.world import context, objects
-from sern_jax.grasp.online import runner
+from sern_jax.grasp.online import checkpoint, driver, step
+from sern_jax.grasp.online import config as online_config
 from sern_jax.learners import base as lbase
 
 # 1 object x 4 learners x 2 seeds x 2 rounds of 3 exploration + 2 evaluation grasps.
 # ε = 0 makes egreedy the greedy policy: with common random numbers its row must equal
 # greedy's exactly. A large learning rate makes 4 fit steps visible.
-CONFIG = runner.OnlineConfig(
+CONFIG = online_config.OnlineConfig(
     policies=("sern", "sern_log", "egreedy", "greedy"), num_seeds=2, rounds=2, explore=3,
     evaluate=2, epsilon=0.0, eval_poses=1, eval_trials=2, fit_steps=4, batch_size=8,
     learning_rate=1e-2)
@@ -44,15 +47,18 @@ def spec():
     return objects.make_object(OBJECT)
 
 
-def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahead=True):
-    """runner.run, keeping a copy of the checkpoint as saved after each round: (result,
-    {next_round: path of the copy}). ``overlap``: each round's evaluation beside the next
-    round; ``settle_ahead``: every batch's resting poses queued at the start (both what a
-    many-core host does; here forced, on any host). With ``overlap``, round r's evaluation
-    saves only after the main thread has written round r + 1 (its update has run), so the
-    checkpoint must leave out rows the main thread has already filled (asserted)."""
-    real_save, real_through, kept = runner._save, runner._through, {}
-    real_update = runner._batched_update
+def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahead=True,
+                             max_queued=2):
+    """driver.run, keeping a copy of the checkpoint as saved after each round: (result,
+    {next_round: path of the copy}). The options (``driver.DriverOptions``): ``overlap``,
+    each round's evaluation beside the next round; ``settle_ahead``, every batch's resting
+    poses queued at the start (both what a many-core host does; here forced, on any host).
+    With ``overlap``, round r's evaluation saves only after the main thread has written
+    round r + 1 (its update has run), so the checkpoint must leave out rows the main thread
+    has already filled (asserted); without, every save comes before the next round's
+    exploration (asserted: the options do change the schedule)."""
+    real_save, real_through, kept = checkpoint.save, checkpoint.through, {}
+    real_update = step.batched_update
     updates, ahead = [0], []
     updated = threading.Condition()
 
@@ -69,7 +75,7 @@ def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahe
 
     def through(results, rewards, next_round):
         # (the evaluation thread, before its save) wait for round next_round's updates
-        if next_round <= config.rounds:
+        if overlap and next_round <= config.rounds:
             with updated:
                 assert updated.wait_for(
                     lambda: updates[0] >= len(config.policies) * next_round, timeout=300)
@@ -83,15 +89,18 @@ def _run_keeping_checkpoints(config, spec, out, theta0, overlap=True, settle_ahe
         shutil.copy(path, kept[next_round])
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(runner, "_save", save_and_copy)
-        mp.setattr(runner, "_batched_update", counting_update)
-        if overlap:
-            mp.setattr(runner, "_through", through)
-        mp.setattr(runner, "OVERLAP_EVALUATION", overlap)
-        mp.setattr(runner, "SETTLE_AHEAD", settle_ahead)
-        res = runner.run(config, [spec], out, theta0=theta0, progress=False, log=_quiet)
+        mp.setattr(checkpoint, "save", save_and_copy)
+        mp.setattr(step, "batched_update", counting_update)
+        mp.setattr(checkpoint, "through", through)
+        options = driver.DriverOptions(overlap_evaluation=overlap, settle_ahead=settle_ahead,
+                                       max_queued_evaluations=max_queued)
+        res = driver.run(config, [spec], out, theta0=theta0, progress=False, log=_quiet,
+                         options=options)
+    assert len(ahead) == config.rounds + 1
     if overlap:  # the evaluations did run beside later rounds' exploration
-        assert ahead and all(ahead[:-1]) and not ahead[-1], ahead
+        assert all(ahead[:-1]) and not ahead[-1], ahead
+    else:  # one phase after another: no save saw a later round
+        assert not any(ahead), ahead
     return res, kept
 
 
@@ -111,12 +120,15 @@ def run_a(run_a_checkpoints):
     return res, out, kept[2]  # next_round = 2: round 1 finished
 
 
-def test_evaluation_beside_the_next_round_changes_nothing(run_a_checkpoints, tiny_theta0,
-                                                          spec, tmp_path):
-    """Round r's evaluation runs beside round r + 1's exploration and update, and every
-    batch's poses settle ahead; run one phase after another, each batch settled when it is
-    made, instead, and every result, every checkpoint after every round (it holds that
-    round and the ones before it only) and the learners' final states are the same bits."""
+def test_driver_options_change_the_schedule_not_the_results(run_a_checkpoints, tiny_theta0,
+                                                            spec, tmp_path):
+    """run_a: round r's evaluation runs beside round r + 1's exploration and update, and
+    every batch's poses settle ahead (the default DriverOptions, settle_ahead forced). Run
+    with DriverOptions(overlap_evaluation=False, settle_ahead=False), one phase after
+    another, each batch settled when it is made: the schedule differs (each save comes
+    before, not after, the next round's update: asserted in _run_keeping_checkpoints), and
+    every result, every checkpoint after every round (it holds that round and the ones
+    before it only), the trial counts and the learners' final states are the same bits."""
     _, res, kept = run_a_checkpoints
     serial, serial_kept = _run_keeping_checkpoints(CONFIG, spec, tmp_path / "serial",
                                                    tiny_theta0, overlap=False,
@@ -147,7 +159,7 @@ def test_a_failed_evaluation_stops_the_run_and_no_later_round_is_saved(tiny_thet
     thread explores round 2: the error stops the run, and no checkpoint claims round 1 or
     later (the evaluation of round 2, queued behind it, neither runs nor saves)."""
     config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1)
-    real, calls = runner._run_trials, []
+    real, calls = step.run_trials, []
 
     def trials(*args, **kwargs):
         if threading.current_thread().name.startswith("sern-evaluate"):
@@ -157,22 +169,22 @@ def test_a_failed_evaluation_stops_the_run_and_no_later_round_is_saved(tiny_thet
         return real(*args, **kwargs)
 
     saved = []
-    real_save = runner._save
-    monkeypatch.setattr(runner, "_run_trials", trials)
-    monkeypatch.setattr(runner, "_save", lambda path, *a: (saved.append(a[-1]),
+    real_save = checkpoint.save
+    monkeypatch.setattr(step, "run_trials", trials)
+    monkeypatch.setattr(checkpoint, "save", lambda path, *a: (saved.append(a[-1]),
                                                            real_save(path, *a)))
     with pytest.raises(RuntimeError, match="injected evaluation failure"):
-        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+        driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
     assert saved == [1]  # (control: run_a, without a failure, saves after every round)
     assert int(io.load_npz(tmp_path / "checkpoint.npz")["next_round"]) == 1
 
 
 def test_through_keeps_earlier_rounds_only():
     shape = (4, 1, 2, 3)
-    results = runner.RoundResults(*(np.full(shape, 0.5) for _ in range(3)),
+    results = checkpoint.RoundResults(*(np.full(shape, 0.5) for _ in range(3)),
                                   np.full(shape + (5,), 7, np.int32), np.full(shape, 2.0))
     rewards = np.ones((4, 1, 3, 2, 5), np.int8)
-    cut, cut_rewards = runner._through(results, rewards, 2)
+    cut, cut_rewards = checkpoint.through(results, rewards, 2)
     for name in ("paper_eval", "lowvar_eval", "explore_success", "pseudo_regret"):
         got = getattr(cut, name)
         assert np.isnan(got[2:]).all() and (got[:2] == getattr(results, name)[:2]).all()
@@ -220,7 +232,7 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
     res, _, aside = run_a
     shutil.copy(aside, tmp_path / "checkpoint.npz")  # stopped after round 1
     lines = []
-    resumed = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    resumed = driver.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                          log=lines.append)
     assert any("at round 2" in line for line in lines)
     assert resumed["table"] == res["table"]
@@ -228,7 +240,7 @@ def test_interrupted_run_resumes_to_same_table(run_a, tiny_theta0, spec, tmp_pat
         np.testing.assert_array_equal(getattr(resumed["results"], name),
                                       getattr(res["results"], name), err_msg=name)
     # a finished run reruns to the same table without new work
-    again = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    again = driver.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                        log=_quiet)
     assert again["table"] == res["table"]
 
@@ -243,11 +255,11 @@ def test_baselines_resume_by_replay_to_the_same_results_and_states(
     stopped after round 1 resumes by replaying the learners' updates and ends with the
     uninterrupted run's results (regret included) and learner states, bit for bit, for the
     randomised learners too (Thompson draws, bootstrap weights, ensemble members)."""
-    config = runner.OnlineConfig(policies=policies, num_seeds=2, rounds=2, explore=2,
+    config = online_config.OnlineConfig(policies=policies, num_seeds=2, rounds=2, explore=2,
                                  evaluate=1, eval_poses=1, eval_trials=1, fit_steps=2,
                                  batch_size=4, regret_trials=1, regret_grasps=1)
     aside = tmp_path / "round1.npz"
-    real = runner._save
+    real = checkpoint.save
 
     def save_and_copy(path, *args):
         real(path, *args)
@@ -255,8 +267,8 @@ def test_baselines_resume_by_replay_to_the_same_results_and_states(
             shutil.copy(path, aside)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(runner, "_save", save_and_copy)
-        full = runner.run(config, [spec], tmp_path / "a", theta0=tiny_theta0,
+        mp.setattr(checkpoint, "save", save_and_copy)
+        full = driver.run(config, [spec], tmp_path / "a", theta0=tiny_theta0,
                           progress=False, log=_quiet)
     saved = io.load_npz(aside)
     assert not any(k.startswith("L") for k in saved)  # no learner state
@@ -266,7 +278,7 @@ def test_baselines_resume_by_replay_to_the_same_results_and_states(
     (tmp_path / "b").mkdir()
     shutil.copy(aside, tmp_path / "b" / "checkpoint.npz")
     lines = []
-    resumed = runner.run(config, [spec], tmp_path / "b", theta0=tiny_theta0,
+    resumed = driver.run(config, [spec], tmp_path / "b", theta0=tiny_theta0,
                          progress=False, log=lines.append)
     assert any("at round 2" in line for line in lines)
     assert any("replayed rounds 1..1" in line for line in lines)
@@ -281,13 +293,13 @@ def test_baselines_resume_by_replay_to_the_same_results_and_states(
 def test_other_run_in_same_dir_is_refused(run_a, tiny_theta0, spec, tmp_path):
     _, out, _ = run_a
     with pytest.raises(ValueError, match="no objects"):
-        runner.run(CONFIG, [], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+        driver.run(CONFIG, [], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
     with pytest.raises(ValueError, match="distinct"):
-        runner.run(CONFIG, [spec, spec], tmp_path, theta0=tiny_theta0, progress=False,
+        driver.run(CONFIG, [spec, spec], tmp_path, theta0=tiny_theta0, progress=False,
                    log=_quiet)
-    other = runner.OnlineConfig(**{**CONFIG.__dict__, "seed": 1})
+    other = online_config.OnlineConfig(**{**CONFIG.__dict__, "seed": 1})
     with pytest.raises(ValueError, match="different learning run"):
-        runner.run(other, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
+        driver.run(other, [spec], out, theta0=tiny_theta0, progress=False, log=_quiet)
 
 
 def test_common_random_numbers(run_a):
@@ -328,7 +340,7 @@ class _HashSimulator:
 
 
 def test_shared_trials_equal_simulating_every_copy(spec):
-    """_run_trials simulates each distinct (seed, trial, grasp) once: the outcomes equal
+    """step.run_trials simulates each distinct (seed, trial, grasp) once: the outcomes equal
     those of simulating every policy's copy with its (shared) noise."""
     from sern_jax.grasp.world import sim as sim_lib
 
@@ -343,9 +355,9 @@ def test_shared_trials_equal_simulating_every_copy(spec):
                         for q in range(num_q)] for s in range(num_s)])[None]
     poses = rng.normal(size=(1, num_s, num_n, 7))
     keys = [[jax.random.key(100 + s) for s in range(num_s)]]
-    simulator, counts = _HashSimulator(), {}
-    got = runner._run_trials([simulator], grasps, poses, keys, num_n, counts)
-    assert counts == {"requested": num_s * num_q * num_n, "simulated": num_s * 6}
+    simulator = _HashSimulator()
+    got, counts = step.run_trials([simulator], grasps, poses, keys, num_n)
+    assert counts == step.TrialCounts(requested=num_s * num_q * num_n, simulated=num_s * 6)
     assert simulator.rows == num_s * 6
     want = np.zeros_like(got)
     for s in range(num_s):
@@ -380,7 +392,7 @@ def test_native_trial_does_not_depend_on_its_batch(spec):
 
 
 def test_oracle_matches_success_probability(spec):
-    """_oracle's first context uses the noise of success_probability(key, ., M): the two
+    """step.oracle's first context uses the noise of success_probability(key, ., M): the two
     estimates agree exactly; invalid candidates get 0."""
     from sern_jax.grasp.world import sim as sim_lib
 
@@ -389,36 +401,35 @@ def test_oracle_matches_success_probability(spec):
     cands = jax.tree.map(lambda x: np.asarray(x)[None, None], ctx.candidates)
     poses = np.asarray(ctx.poses)[None, None]
     key = jax.random.key(5)
-    counts = {"requested": 0, "simulated": 0}
-    got = runner._oracle([simulator], cands, poses, 2, [[key]], counts)
+    got, counts = step.oracle([simulator], cands, poses, 2, [[key]])
     assert got.shape == (1, 1, 2, 64)
     valid = np.asarray(ctx.candidates.valid)
     want = simulator.success_probability(key, np.asarray(ctx.candidates.grasps)[0], 2,
                                          valid[0], np.asarray(ctx.poses)[0])
     np.testing.assert_array_equal(got[0, 0, 0], want.prob)
     assert (got[0, 0][~valid] == 0).all()
-    assert counts["simulated"] == 2 * valid.sum()
+    assert counts.simulated == counts.requested == 2 * valid.sum()
 
 
 def test_regret_accounting(tiny_theta0, spec, tmp_path, monkeypatch):
     """With regret_trials, the oracle chooses the best candidate on one set of trials and
-    values every candidate on an independent set (issue 17): greedy's pseudo-regret is
+    values every candidate on an independent set: greedy's pseudo-regret is
     value[argmax select] - value[chosen], summed over the round; NaN at round 0; the table
     carries Student-t intervals over the seeds."""
     from sern_jax.analysis import stats
 
     calls = []
-    real = runner._oracle
+    real = step.oracle
 
-    def spy(simulators, cands, poses, num_trials, keys, counts):
-        out = real(simulators, cands, poses, num_trials, keys, counts)
+    def spy(simulators, cands, poses, num_trials, keys):
+        out, counts = real(simulators, cands, poses, num_trials, keys)
         calls.append((jax.random.key_data(keys[0][0]), np.asarray(cands.valid, bool), out))
-        return out
+        return out, counts
 
-    monkeypatch.setattr(runner, "_oracle", spy)
+    monkeypatch.setattr(step, "oracle", spy)
     config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=2,
                                  rounds=1, explore=2, regret_trials=2)
-    res = runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    res = driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet)
     pr = res["results"].pseudo_regret
     assert np.isnan(pr[0]).all() and np.isfinite(pr[1:]).all()
@@ -446,9 +457,9 @@ def test_learner_told_only_failures_lowers_its_scores(tiny_theta0, spec, tmp_pat
                                                       monkeypatch):
     """Every trial fails: after the run, the learner scores the grasps it tried lower than
     θ0 did, in every (seed, learner) copy."""
-    monkeypatch.setattr(runner, "_run_trials",
-                        lambda simulators, grasps, *a: np.zeros(grasps.shape[:4], bool))
-    res = runner.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    monkeypatch.setattr(step, "run_trials", lambda simulators, grasps, *a: (
+        np.zeros(grasps.shape[:4], bool), step.TrialCounts(0, 0)))
+    res = driver.run(CONFIG, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet)
     assert (res["results"].paper_eval == 0).all()
     net = tiny_theta0.network
@@ -477,14 +488,14 @@ def test_sern_choices_follow_softmax_over_valid(tiny_theta0, spec):
     valid[0, ::4] = False  # some invalid slots, among them possibly the best
     cands = ctx.candidates._replace(valid=jnp.asarray(valid))
     crops = crops_lib.extract_batch(ctx.depth, cands)
-    model = runner.quality_model(runner.copies_network(tiny_theta0.network.config))
+    model = online_config.quality_model(online_config.copies_network(tiny_theta0.network.config))
     r = np.asarray(model.apply(tiny_theta0.params, crops.image[0], crops.depth[0]), np.float64)
     v = valid[0]
     alpha = float(np.float32((r[v].max() - r[v].min()) / 3))  # a law that is not flat
-    config = runner.OnlineConfig(policies=("sern",), alpha=alpha)
-    learner = runner.make_learner(config, "sern", model)
+    config = online_config.OnlineConfig(policies=("sern",), alpha=alpha)
+    learner = online_config.make_learner(config, "sern", model)
     state = learner.init(jax.random.key(0), tiny_theta0.params,
-                         runner.core_data("dpp", tiny_theta0))
+                         online_config.core_data("dpp", tiny_theta0))
 
     def act(u):
         obs = lbase.Obs((crops.image[0], crops.depth[0]), jnp.asarray(v), u, jnp.int32(0))
@@ -539,7 +550,7 @@ def _chisquare_p(counts, probs):
 ])
 def test_bad_config_is_a_clear_error(field, value, match):
     with pytest.raises(ValueError, match=match):
-        runner.OnlineConfig(**{field: value})
+        online_config.OnlineConfig(**{field: value})
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -562,9 +573,9 @@ def test_bad_config_is_a_clear_error(field, value, match):
 ])
 def test_learn_cli_bad_input_fails_fast(argv, match, capsys, monkeypatch, tmp_path):
     def unreachable(*a, **k):
-        raise AssertionError("bad input reached runner.run")
+        raise AssertionError("bad input reached driver.run")
 
-    monkeypatch.setattr(runner, "run", unreachable)
+    monkeypatch.setattr(driver, "run", unreachable)
     monkeypatch.setattr(artifacts, "DATA_DIR", tmp_path / "no_theta0")  # no shipped θ0
     artifacts._load.cache_clear()
     t = time.perf_counter()
@@ -584,10 +595,10 @@ def test_run_fingerprint_sees_geometry(tiny_theta0, spec):
                             vertices=tuple(tuple(2 * x for x in v) for v in g.vertices))
         for g in spec.geoms))
     assert scaled.name == spec.name
-    assert (runner.run_fingerprint(CONFIG, [spec], tiny_theta0)
-            != runner.run_fingerprint(CONFIG, [scaled], tiny_theta0))
-    assert (runner.run_fingerprint(CONFIG, [spec], tiny_theta0)
-            == runner.run_fingerprint(CONFIG, [objects.make_object(OBJECT)], tiny_theta0))
+    assert (online_config.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            != online_config.run_fingerprint(CONFIG, [scaled], tiny_theta0))
+    assert (online_config.run_fingerprint(CONFIG, [spec], tiny_theta0)
+            == online_config.run_fingerprint(CONFIG, [objects.make_object(OBJECT)], tiny_theta0))
 
 
 def test_learn_cli_zero_rounds_is_an_argument_error(capsys):
@@ -624,7 +635,7 @@ REFERENCE = __import__("pathlib").Path(__file__).parent / "data" / "learn_refere
 
 
 def params_digests(res) -> dict[str, str]:
-    """SHA-256 of each (policy, seed) copy's final network parameters in a ``runner.run``
+    """SHA-256 of each (policy, seed) copy's final network parameters in a ``driver.run``
     result, keyed "policy/seed" (the reference file's ``params_digest``)."""
     import hashlib
 
@@ -703,6 +714,113 @@ def test_same_results_as_the_pre_refactor_runner(run_a):
                                           ref[want][0, :, q])
 
 
+# ----------------------------------------------------------------------------- one round, pure
+
+
+def _pure_round_pieces(tiny_theta0, spec):
+    """What step's functions take, built here without the driver: the learners, one native
+    simulator on one thread, the [O, S] keys, θ0's states; and a maker of a round's contexts
+    one batch after another in this thread."""
+    from sern_jax.grasp.online import keys as keys_lib
+    from sern_jax.grasp.world import sim
+
+    root = jax.random.key(CONFIG.seed)
+    seeds = range(CONFIG.num_seeds)
+    model = online_config.quality_model(online_config.copies_network(tiny_theta0.network.config))
+    scene = context.scene_model(spec)
+    copies = step.Copies(
+        tuple(online_config.make_learner(CONFIG, n, model) for n in CONFIG.policies),
+        CONFIG.policies, model, (sim.GraspSimulator(scene, num_threads=1),), (OBJECT,),
+        keys_lib.object_keys(root, [OBJECT], seeds))
+    states = step.init_states(copies, tiny_theta0.params,
+                              online_config.core_data(CONFIG.core_set, tiny_theta0))
+
+    def contexts(stream_id, r, num):
+        rows = [[context.make_contexts(keys_lib.stream(keys_lib.object_key(root, OBJECT, s),
+                                                       stream_id, r),
+                                       spec, num, model=scene, threads=1)
+                 for s in seeds]]
+        return step.stack_contexts([[(c.poses, c.depth, c.candidates) for c in row]
+                                    for row in rows])
+
+    return copies, states, contexts, keys_lib
+
+
+def test_rounds_of_pure_step_functions_reproduce_the_run(run_a, tiny_theta0, spec):
+    """step's functions called directly (no thread, no file: contexts made one batch after
+    another, trials on one native thread) for rounds 0, 1 and 2 of CONFIG give run_a's
+    choices, rewards, both evaluations, trial counts and final learner states, bit for
+    bit; a step called again on the same inputs gives the same arrays."""
+    res, _, _ = run_a
+    results = res["results"]
+    copies, states, contexts, keys_lib = _pure_round_pieces(tiny_theta0, spec)
+    lowvar = step.with_crops(contexts(keys_lib.LOWVAR_CONTEXT, 0, CONFIG.eval_poses))
+    requested = simulated = 0
+
+    def evaluate(r, states):
+        paper, c1 = step.evaluate(copies, states, contexts(keys_lib.EVAL_CONTEXT, r,
+                                                           CONFIG.evaluate), r)
+        lv, c2 = step.evaluate_lowvar(copies, states, lowvar, r, CONFIG.eval_trials)
+        np.testing.assert_array_equal(paper, results.paper_eval[r], err_msg=str(r))
+        np.testing.assert_array_equal(lv, results.lowvar_eval[r], err_msg=str(r))
+        return c1.requested + c2.requested, c1.simulated + c2.simulated
+
+    requested, simulated = evaluate(0, states)
+    for r in (1, 2):
+        ctx = step.with_crops(contexts(keys_lib.EXPLORE_CONTEXT, r, CONFIG.explore))
+        acted = step.act(copies, states, ctx, r, with_probs=False)
+        assert acted.probs is None
+        np.testing.assert_array_equal(acted.action.transpose(0, 2, 1, 3),
+                                      results.explore_action[r])
+        again = step.act(copies, states, ctx, r, with_probs=False)
+        np.testing.assert_array_equal(again.action, acted.action)  # nothing kept between
+        success, counts = step.explore_trials(copies, ctx, acted.action, r)
+        np.testing.assert_array_equal(success.mean(-1).transpose(0, 2, 1),
+                                      results.explore_success[r])
+        states = step.update(copies, states, ctx, acted.action, success, r)
+        more = evaluate(r, states)
+        requested += counts.requested + more[0]
+        simulated += counts.simulated + more[1]
+    assert res["trial_counts"] == {"requested": requested, "simulated": simulated}
+    for q in range(len(CONFIG.policies)):
+        for got, want in zip(jax.tree.leaves(states[q]), jax.tree.leaves(res["states"][q])):
+            assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
+    # control: the same contexts and states under round 1's streams give other choices
+    other = step.act(copies, states, ctx, 1, with_probs=False)
+    assert (other.action != acted.action).any()
+
+
+def test_context_order_of_a_new_and_a_resumed_run():
+    """driver.context_order, the order the driver queues (and settles ahead) its batches:
+    the low-variance poses, round 0's evaluation, round 1's exploration, then each round's
+    evaluation and the next round's exploration; a run resumed at round 2 replays round 1's
+    exploration first and has no round 0; nothing past the last round."""
+    from sern_jax.grasp.online import keys as k
+
+    e, v, lv = CONFIG.explore, CONFIG.evaluate, CONFIG.eval_poses
+    assert driver.context_order(CONFIG, 0) == [
+        (k.LOWVAR_CONTEXT, 0, lv), (k.EVAL_CONTEXT, 0, v), (k.EXPLORE_CONTEXT, 1, e),
+        (k.EVAL_CONTEXT, 1, v), (k.EXPLORE_CONTEXT, 2, e), (k.EVAL_CONTEXT, 2, v)]
+    assert driver.context_order(CONFIG, 2) == [
+        (k.LOWVAR_CONTEXT, 0, lv), (k.EXPLORE_CONTEXT, 1, e), (k.EXPLORE_CONTEXT, 2, e),
+        (k.EVAL_CONTEXT, 2, v)]
+    no_lowvar = dataclasses.replace(CONFIG, eval_poses=0)
+    assert driver.context_order(no_lowvar, 0)[0] == (k.EVAL_CONTEXT, 0, v)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("overlap_evaluation", 1), ("max_queued_evaluations", 0),
+    ("max_queued_evaluations", True), ("settle_ahead", "yes")])
+def test_bad_driver_options_are_refused(field, value, tiny_theta0, spec, tmp_path):
+    with pytest.raises(ValueError, match=field):
+        driver.DriverOptions(**{field: value})
+    with pytest.raises(ValueError, match="options must be a DriverOptions"):
+        driver.run(CONFIG, [spec], tmp_path / "x", theta0=tiny_theta0, progress=False,
+                   log=_quiet, options={field: value})
+    assert not (tmp_path / "x").exists()
+    assert driver.DriverOptions(overlap_evaluation=False).queue_limit == 1
+
+
 def _uniform_learner(no_arm: bool = False) -> lbase.Learner:
     """A toy learner in a few lines: uniform over the valid candidates, learns nothing
     (``no_arm``: a broken one that never chooses)."""
@@ -722,24 +840,24 @@ def _uniform_learner(no_arm: bool = False) -> lbase.Learner:
 
 def test_toy_learner_runs_through_the_runner(tiny_theta0, spec, tmp_path):
     config = dataclasses.replace(CONFIG, policies=("greedy",), num_seeds=1, eval_poses=0)
-    res = runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
+    res = driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet, learners={"greedy": _uniform_learner()})
     action = res["results"].explore_action[1:, 0, 0, 0]  # [R, E]
     assert ((action >= 0) & (action < 64)).all()
     assert int(res["states"][0].buffer.count[0, 0]) == config.horizon
     # another learner under a registered name is another run: its directory is refused
     with pytest.raises(ValueError, match="different learning run"):
-        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
+        driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet)
 
 
 def test_learner_returning_no_grasp_stops_the_run(tiny_theta0, spec, tmp_path):
     """NO_ARM while valid candidates exist is a broken learner, not a failed grasp."""
     config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1,
                                  eval_poses=0)
-    with pytest.raises(runner.LearnerError,
+    with pytest.raises(online_config.LearnerError,
                        match=r"learner 'greedy' returned no grasp \(NO_ARM\) on "
                              r"triangular_prism, seed 0, round 1, grasp 0 while \d+ "):
-        runner.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet,
+        driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False, log=_quiet,
                    learners={"greedy": _uniform_learner(no_arm=True)})
     # round 0's evaluation was running beside round 1 when it stopped: it was kept
     saved = io.load_npz(tmp_path / "checkpoint.npz")
@@ -757,9 +875,9 @@ def test_every_learner_flag_refuses_nan_in_one_line(flag, capsys, monkeypatch, t
     """Every registered learner's hyperparameter is a flag of `sern grasp learn`, and a
     non-number there is a one-line error naming it, exit 2, before anything runs."""
     def unreachable(*a, **k):
-        raise AssertionError("bad input reached runner.run")
+        raise AssertionError("bad input reached driver.run")
 
-    monkeypatch.setattr(runner, "run", unreachable)
+    monkeypatch.setattr(driver, "run", unreachable)
     monkeypatch.setattr(artifacts, "DATA_DIR", tmp_path / "no_theta0")
     artifacts._load.cache_clear()
     try:
@@ -784,7 +902,7 @@ def test_paper_setting_table_unchanged(tmp_path):
     want = json.loads((REFERENCE.parent / "table1_reference.json").read_text())
     theta0 = artifacts.load_theta0()
     specs = [objects.make_object(n) for n in artifacts.hard_set(theta0)["objects"]]
-    res = runner.run(runner.OnlineConfig(), specs, tmp_path, theta0=theta0, progress=False,
+    res = driver.run(online_config.OnlineConfig(), specs, tmp_path, theta0=theta0, progress=False,
                      log=_quiet)
     got = [{k: v for k, v in r.items() if k not in ("sd", "se")} for r in res["table"]]
     assert got == want["table"]
@@ -795,15 +913,15 @@ def test_check_actions_cases(spec):
     """NO_ARM is allowed only where nothing is valid; an invalid or out-of-range slot never."""
     valid = np.zeros((1, 1, 2, 4), bool)  # [O, S, N, K]: grasp 0 has slots 1, 2 valid
     valid[0, 0, 0, 1:3] = True
-    check = lambda a: runner._check_actions(  # noqa: E731
-        np.asarray(a).reshape(1, 1, 1, 2), valid, ("toy",), [spec], 1)
+    check = lambda a: step.check_actions(  # noqa: E731
+        np.asarray(a).reshape(1, 1, 1, 2), valid, ("toy",), [spec.name], 1)
     check([1, pol.NO_ARM])  # fine: grasp 1 has nothing valid
     for action, match in (([pol.NO_ARM, pol.NO_ARM], r"no grasp \(NO_ARM\) .* grasp 0 while 2"),
                           ([0, pol.NO_ARM], "candidate 0, not a valid slot"),
                           ([7, pol.NO_ARM], "candidate 7, not a valid slot"),
                           ([2, 3], "grasp 1 while 0 candidates"),
                           ([2, -5], "candidate -5, not a valid slot")):
-        with pytest.raises(runner.LearnerError, match=match):
+        with pytest.raises(online_config.LearnerError, match=match):
             check(action)
 
 
@@ -822,13 +940,13 @@ def test_budget_counts_both_oracle_sets_and_the_subsample():
     assert off.disk_bytes < 20e6  # no learner state in the checkpoint
 
 
-# ------------------------------------------------- a subset of the seeds (engineer Y, issue 20)
+# ----------------------------------------------------------------------------- a subset of the seeds
 
 def test_bad_seed_indices_are_refused(tiny_theta0, spec, tmp_path):
     """seed_indices: distinct integers in 0..num_seeds-1, refused before anything runs."""
     for bad in ((), (0, 0), (2,), (-1,), (True,), (0.5,)):
         with pytest.raises(ValueError, match="seed_indices must be distinct integers"):
-            runner.run(CONFIG, [spec], tmp_path / "bad", theta0=tiny_theta0,
+            driver.run(CONFIG, [spec], tmp_path / "bad", theta0=tiny_theta0,
                        progress=False, log=_quiet, seed_indices=bad)
     assert not (tmp_path / "bad").exists()
 
@@ -841,9 +959,9 @@ def test_seed_subset_equals_those_seeds_of_the_full_run(tiny_theta0, spec, tmp_p
     a [1, 1] batch, is another program: its parameters differed by up to 3.4e-7 here, see
     docs/CLUSTER.md, so it is not claimed.)"""
     config = dataclasses.replace(CONFIG, num_seeds=4)
-    full = runner.run(config, [spec], tmp_path / "full", theta0=tiny_theta0, progress=False,
+    full = driver.run(config, [spec], tmp_path / "full", theta0=tiny_theta0, progress=False,
                       log=_quiet)
-    sub = runner.run(config, [spec], tmp_path / "sub", theta0=tiny_theta0, progress=False,
+    sub = driver.run(config, [spec], tmp_path / "sub", theta0=tiny_theta0, progress=False,
                      log=_quiet, seed_indices=(1, 3))
     assert sub["seed_indices"] == (1, 3) and full["seed_indices"] == (0, 1, 2, 3)
     assert sub["fingerprint"] != full["fingerprint"]
@@ -855,7 +973,7 @@ def test_seed_subset_equals_those_seeds_of_the_full_run(tiny_theta0, spec, tmp_p
         for x, y in zip(jax.tree.leaves(state_full), jax.tree.leaves(state_sub)):
             assert np.asarray(x)[:, [1, 3]].tobytes() == np.asarray(y).tobytes()
     with pytest.raises(ValueError, match="different learning run"):  # not the full run's dir
-        runner.run(config, [spec], tmp_path / "full", theta0=tiny_theta0, progress=False,
+        driver.run(config, [spec], tmp_path / "full", theta0=tiny_theta0, progress=False,
                    log=_quiet, seed_indices=(1, 3))
 
 
@@ -869,9 +987,9 @@ def test_fingerprint_separates_the_ensemble_layouts_and_keeps_old_whole_network_
     import json
 
     base = dict(policies=("sern", "ensemble_ts"), num_seeds=2, rounds=2, explore=2)
-    shared = runner.OnlineConfig(**base)
-    networks = runner.OnlineConfig(**base, hyper={"ensemble_heads": "networks"})
-    explicit = runner.OnlineConfig(**base, hyper={"ensemble_heads": "shared"})
+    shared = online_config.OnlineConfig(**base)
+    networks = online_config.OnlineConfig(**base, hyper={"ensemble_heads": "networks"})
+    explicit = online_config.OnlineConfig(**base, hyper={"ensemble_heads": "shared"})
     assert shared.learner_config("ensemble_ts").ensemble_heads == "shared"
     assert shared.fingerprint() == explicit.fingerprint()
     assert shared.fingerprint() != networks.fingerprint()
@@ -885,9 +1003,9 @@ def test_fingerprint_separates_the_ensemble_layouts_and_keeps_old_whole_network_
     assert networks.fingerprint() == old
     assert shared.fingerprint() != old  # the bug: today's default resumed an old directory
     # control: other settings still change it, and runs without ensemble_ts are untouched
-    assert runner.OnlineConfig(**{**base, "num_seeds": 3},
+    assert online_config.OnlineConfig(**{**base, "num_seeds": 3},
                                hyper={"ensemble_heads": "networks"}).fingerprint() != old
-    plain = runner.OnlineConfig(policies=("sern",), num_seeds=2, rounds=2, explore=2)
+    plain = online_config.OnlineConfig(policies=("sern",), num_seeds=2, rounds=2, explore=2)
     d = dataclasses.asdict(plain)
     del d["hyper"], d["regret_grasps"]
     assert plain.fingerprint() == hashlib.sha256(
@@ -895,21 +1013,24 @@ def test_fingerprint_separates_the_ensemble_layouts_and_keeps_old_whole_network_
 
 
 def test_objects_trials_in_threads_equal_one_object_at_a_time():
-    """_run_trials hands each object's trials to its simulator from a thread of its own
-    (issue 20): outcomes and counts equal running the objects one after another."""
+    """step.run_trials hands each object's trials to its simulator from a thread of its own
+    (a thread pool's map): outcomes and counts equal running the objects one after another."""
     rng = np.random.default_rng(3)
     num_o, num_s, num_q, num_n = 3, 2, 2, 5
     grasps = rng.normal(size=(num_o, num_s, num_q, num_n, 4))
     grasps[:, :, 1, ::2] = grasps[:, :, 0, ::2]  # shared choices: deduplicated per object
     poses = rng.normal(size=(num_o, num_s, num_n, 7))
     keys = [[jax.random.key(10 * o + s) for s in range(num_s)] for o in range(num_o)]
-    sims, counts = [_HashSimulator() for _ in range(num_o)], {}
-    got = runner._run_trials(sims, grasps, poses, keys, num_n, counts)
-    want, want_counts = np.zeros_like(got), {}
+    sims = [_HashSimulator() for _ in range(num_o)]
+    with concurrent.futures.ThreadPoolExecutor(num_o) as pool:
+        got, counts = step.run_trials(sims, grasps, poses, keys, num_n, pool.map)
+    want, want_counts = np.zeros_like(got), [0, 0]
     for o in range(num_o):
-        want[o] = runner._run_trials([_HashSimulator()], grasps[o:o + 1], poses[o:o + 1],
-                                     keys[o:o + 1], num_n, want_counts)[0]
+        one, c = step.run_trials([_HashSimulator()], grasps[o:o + 1], poses[o:o + 1],
+                                 keys[o:o + 1], num_n)
+        want[o] = one[0]
+        want_counts = [want_counts[0] + c.requested, want_counts[1] + c.simulated]
     np.testing.assert_array_equal(got, want)
-    assert counts == want_counts == {"requested": num_o * num_s * num_q * num_n,
-                                     "simulated": num_o * num_s * (num_n + num_n // 2)}
+    assert tuple(counts) == tuple(want_counts) == (
+        num_o * num_s * num_q * num_n, num_o * num_s * (num_n + num_n // 2))
     assert 0 < got.mean() < 1 and not (got[0] == got[1]).all()

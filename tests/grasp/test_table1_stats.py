@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 
 from experiments import paper_table1
-from sern_jax.grasp.online import runner as online
+from sern_jax.grasp.online import checkpoint
 
 
 def test_table_rows_carry_sd_and_se_beside_std():
     rng = np.random.default_rng(0)
     paper = rng.integers(0, 6, (3, 1, 1, 5)) / 5.0  # [R+1, O, Q, S]: 5-grasp rates
-    row = online.table_rows(["obj"], ("sern",), paper)[0]
+    row = checkpoint.table_rows(["obj"], ("sern",), paper)[0]
     x = 100.0 * paper[1:, 0, 0, :]
     np.testing.assert_allclose(row["std"], x.std(1))  # unchanged contract (ddof 0)
     np.testing.assert_allclose(row["sd"], x.std(1, ddof=1))
     np.testing.assert_allclose(row["se"], x.std(1, ddof=1) / math.sqrt(5))
-    one = online.table_rows(["obj"], ("sern",), paper[..., :1])[0]
+    one = checkpoint.table_rows(["obj"], ("sern",), paper[..., :1])[0]
     assert one["sd"] == [None, None] and one["se"] == [None, None]
 
 

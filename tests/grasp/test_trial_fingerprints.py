@@ -9,7 +9,7 @@ import pytest
 
 from sern_jax.infra import io
 from sern_jax.grasp.model import dataset, pretrain
-from sern_jax.grasp.online import runner
+from sern_jax.grasp.online import config as online_config
 from sern_jax.grasp.world import scene, sim
 
 
@@ -59,8 +59,8 @@ def test_load_refuses_a_d0_of_another_trial(tmp_path, monkeypatch):
 def test_learn_fingerprint_sees_the_default_trial(monkeypatch, tiny_theta0):
     from sern_jax.grasp.world import objects
 
-    config = runner.OnlineConfig(rounds=1, explore=1, num_seeds=1)
+    config = online_config.OnlineConfig(rounds=1, explore=1, num_seeds=1)
     specs = [objects.make_object("small_box")]
-    new = runner.run_fingerprint(config, specs, tiny_theta0)
-    monkeypatch.setattr(runner.sim_lib, "physics_settings", _weak())
-    assert runner.run_fingerprint(config, specs, tiny_theta0) != new
+    new = online_config.run_fingerprint(config, specs, tiny_theta0)
+    monkeypatch.setattr(online_config.sim_lib, "physics_settings", _weak())
+    assert online_config.run_fingerprint(config, specs, tiny_theta0) != new

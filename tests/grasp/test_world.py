@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from sern_jax.grasp.world import context, objects, scene, sim
-from sern_jax.grasp.online import runner as online
+from sern_jax.grasp.online import config as online_config
+from sern_jax.grasp.online import driver
 
-CONFIG = online.OnlineConfig(policies=("greedy",), num_seeds=2, rounds=1, explore=3,
+CONFIG = online_config.OnlineConfig(policies=("greedy",), num_seeds=2, rounds=1, explore=3,
                              evaluate=2, eval_poses=0, fit_steps=1, batch_size=4)
 
 
@@ -21,22 +22,22 @@ def test_world_reaches_the_trials_and_the_fingerprint(tiny_theta0, tmp_path):
     spec = objects.make_object("small_box")
     # 0.05 N per finger cannot lift a box of ~0.1 kg (friction <= 0.8): every trial fails.
     weak = context.ContextConfig(scene=scene.SceneConfig(finger_force=0.05))
-    res = online.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
+    res = driver.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
                      log=_quiet, context_config=weak)
     assert np.all(res["results"].paper_eval[1:] == 0.0)
     assert np.all(res["results"].explore_success[1:] == 0.0)
     # control: the same run in the default world lifts the box some of the time
-    base = online.run(CONFIG, [spec], tmp_path / "default", theta0=tiny_theta0,
+    base = driver.run(CONFIG, [spec], tmp_path / "default", theta0=tiny_theta0,
                       progress=False, log=_quiet)
     assert base["results"].explore_success[1:].sum() + base["results"].paper_eval[1:].sum() > 0
     # the same directory with the default world is another run
     with pytest.raises(ValueError, match="different learning run"):
-        online.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
+        driver.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
                    log=_quiet)
     # and a trial config differing only in its friction range is another run too
     other = sim.TrialConfig(friction_range=(0.2, 0.4))
     with pytest.raises(ValueError, match="different learning run"):
-        online.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
+        driver.run(CONFIG, [spec], tmp_path / "weak", theta0=tiny_theta0, progress=False,
                    log=_quiet, context_config=weak, trial_config=other)
 
 

@@ -62,11 +62,69 @@ class Theta0(NamedTuple):
     screen: dict | None = None  # the hard-set screen made with this θ0 (screen.json)
 
 
-def _config_from(manifest: dict) -> qn.QualityNetConfig:
+def _config_from(manifest: dict, path: Path | None = None) -> qn.QualityNetConfig:
     fields = {f.name for f in dataclasses.fields(qn.QualityNetConfig)}
     raw = {k: (tuple(v) if isinstance(v, list) else v)
            for k, v in manifest["network_config"].items() if k in fields}
-    return qn.QualityNetConfig(**raw)
+    try:
+        config = qn.QualityNetConfig(**raw)
+        hash(config)  # list-valued fields (unhashable) are a damaged manifest too
+    except (TypeError, ValueError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"{path or MANIFEST_FILE}: 'network_config' is not a quality "
+                         f"network's ({first}); restore the θ0 directory") from None
+    return config
+
+
+_RESTORE = ("restore it (reinstall sern_jax, or rerun `sern grasp pretrain --install`), or "
+            "pass another --theta0")
+# screen.json rows: the fields the hard-set rule reads (pretrain.screen writes them)
+_SCREEN_ROW = {"object": str, "greedy_success": (int, float), "best_success": (int, float),
+               "hard": bool}
+
+
+def read_manifest(path: str | Path) -> dict:
+    """A θ0 ``manifest.json``, checked against its schema: a JSON object whose
+    ``network_config`` is an object and whose ``theta0_sha256`` is the 64-hex-digit digest
+    of ``theta0.msgpack`` (every θ0 carries one; a manifest without it is refused, as its
+    weights could not be checked). One line naming the file otherwise (``ValueError``)."""
+    from sern_jax.infra import validate
+
+    manifest = validate.read_json_object(
+        path, {"network_config": dict, "theta0_sha256": str}, what="θ0 manifest",
+        advice=_RESTORE)
+    digest = manifest["theta0_sha256"]
+    if len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest):
+        raise ValueError(f"{path}: 'theta0_sha256' is not a sha256 digest (a damaged θ0 "
+                         f"manifest); {_RESTORE}")
+    return manifest
+
+
+def read_screen(path: str | Path) -> dict:
+    """A θ0 ``screen.json`` checked against its schema (an object whose ``objects`` is a
+    list of rows with the fields :func:`hard_set` reads); one line naming the file
+    otherwise (``ValueError``)."""
+    from sern_jax.infra import validate
+
+    screen = validate.read_json_object(path, {"objects": list}, what="θ0 screen",
+                                       advice=_RESTORE)
+    for i, row in enumerate(screen["objects"]):
+        if not isinstance(row, dict):
+            raise ValueError(f"{path}: row {i} of 'objects' is not an object (a damaged θ0 "
+                             f"screen); {_RESTORE}")
+        for key, types in _SCREEN_ROW.items():
+            value = row.get(key)
+            if not isinstance(value, types) or (isinstance(value, bool) and bool not in
+                                                (types if isinstance(types, tuple)
+                                                 else (types,))):
+                raise ValueError(f"{path}: row {i} of 'objects' has no valid {key!r} (a "
+                                 f"damaged θ0 screen); {_RESTORE}")
+        fresh = row.get("best_success_fresh")
+        if fresh is not None and (isinstance(fresh, bool) or not isinstance(fresh,
+                                                                              (int, float))):
+            raise ValueError(f"{path}: row {i} of 'objects' has no valid "
+                             f"'best_success_fresh' (a damaged θ0 screen); {_RESTORE}")
+    return screen
 
 
 def save(
@@ -103,13 +161,13 @@ def _load(path: str) -> Theta0:
         raise ValueError(
             f"no pretrained network in {root} (missing {', '.join(missing)}); make one with "
             "`sern grasp dataset` then `sern grasp pretrain --install`")
-    manifest = io.load_json(root / MANIFEST_FILE)
-    network = qn.make_quality_network(_config_from(manifest))
+    manifest = read_manifest(root / MANIFEST_FILE)
+    network = qn.make_quality_network(_config_from(manifest, root / MANIFEST_FILE))
     blob = (root / THETA0_FILE).read_bytes()
     digest = hashlib.sha256(blob).hexdigest()
-    if manifest.get("theta0_sha256") not in (None, digest):
+    if manifest["theta0_sha256"] != digest:  # every θ0 carries its digest, and it is checked
         raise ValueError(f"{root / THETA0_FILE} does not match its manifest (sha256 "
-                         f"{digest[:16]} != {manifest['theta0_sha256'][:16]})")
+                         f"{digest[:16]} != {manifest['theta0_sha256'][:16]}); {_RESTORE}")
     template = network.init(jax.random.key(0))
     try:
         params = serialization.from_bytes(template, blob)
@@ -120,13 +178,20 @@ def _load(path: str) -> Theta0:
     params = jax.tree.map(jnp.asarray, params)
     core = io.load_npz(root / CORE_FILE, advice="restore it (reinstall sern_jax, or rerun "
                        "`sern grasp pretrain --install`), or pass another --theta0")
-    screen = io.load_json(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
+    screen = read_screen(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
     return Theta0(network, params, core, manifest, digest[:16], screen)
 
 
-def load_theta0(path: str | Path | None = None) -> Theta0:
-    """The pretrained θ0 and core sets (default: the package's shipped copy)."""
-    return _load(str(Path(path) if path is not None else DATA_DIR))
+def load_theta0(path: str | Path | None = None, *, flag: str = "--theta0") -> Theta0:
+    """The pretrained θ0 and core sets (default: the package's shipped copy). A directory
+    the user named (``path``) that holds no θ0 or a damaged one is one line naming ``flag``
+    and the directory (``ValueError``)."""
+    try:
+        return _load(str(Path(path) if path is not None else DATA_DIR))
+    except ValueError as exc:
+        if path is None or str(exc).startswith(flag):
+            raise
+        raise ValueError(f"{flag} {path}: {exc}") from None
 
 
 def core_set_data(kind: str, theta0: Theta0) -> qn.TrainData:

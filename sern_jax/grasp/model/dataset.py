@@ -218,12 +218,11 @@ def _check_dir(out_dir: Path, config: DatasetConfig) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"--out {out_dir} exists and is not a directory")
     if cfg_path.exists():
-        try:
-            old = io.load_json(cfg_path)
-        except (OSError, ValueError):
-            raise ValueError(f"{cfg_path} is unreadable; choose another --out or delete "
-                             "it") from None
-        if not isinstance(old, dict) or old.get("fingerprint") != config.fingerprint():
+        from sern_jax.infra import validate
+
+        old = validate.read_json_object(cfg_path, what="dataset config",
+                                        advice="choose another --out or delete it")
+        if old.get("fingerprint") != config.fingerprint():
             raise ValueError(
                 f"{out_dir} holds a different dataset (config {old.get('config')}); "
                 "choose another --out or delete it")
@@ -316,6 +315,25 @@ def _generate(config, out_dir: Path, specs, progress: bool, log, ray=None) -> di
     return summary
 
 
+def read_config(cfg_path: str | Path) -> tuple[DatasetConfig, str | None]:
+    """A D0 ``config.json``: its :class:`DatasetConfig` and stored fingerprint, checked
+    against its schema (a JSON object with a ``config`` object of the config's fields), else
+    one line naming the file (``ValueError``)."""
+    from sern_jax.infra import validate
+
+    advice = "rerun `sern grasp dataset` with the flags that made it"
+    raw = validate.read_json_object(cfg_path, {"config": dict}, what="dataset config",
+                                    advice=advice)
+    try:
+        config = DatasetConfig(**raw["config"])
+    except (TypeError, ValueError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"{cfg_path} is not a dataset's config ({first}); {advice}") \
+            from None
+    stored = raw.get("fingerprint")
+    return config, (stored if isinstance(stored, str) else None)
+
+
 def load(out_dir: str | Path) -> tuple[DatasetConfig, dict[str, np.ndarray]]:
     """Loads every shard of a finished dataset; arrays concatenated over contexts."""
     out_dir = Path(out_dir)
@@ -323,13 +341,7 @@ def load(out_dir: str | Path) -> tuple[DatasetConfig, dict[str, np.ndarray]]:
     if not cfg_path.exists():
         raise ValueError(f"{out_dir} is not a dataset directory (no config.json); "
                          "make one with `sern grasp dataset --out DIR`")
-    try:
-        config = DatasetConfig(**io.load_json(cfg_path)["config"])
-    except (OSError, ValueError, TypeError, KeyError) as exc:
-        raise ValueError(f"{cfg_path} is unreadable or not a dataset's config "
-                         f"({type(exc).__name__}); rerun `sern grasp dataset` with the flags "
-                         "that made it") from None
-    stored = io.load_json(cfg_path).get("fingerprint")
+    config, stored = read_config(cfg_path)
     if stored != config.fingerprint():
         raise ValueError(
             f"{out_dir} was labelled in another simulated world (fingerprint {stored}, this "

@@ -16,10 +16,8 @@ image, pose layer, merged fc) but replace pooling by strides, drop LRN and shrin
 stage 1 = a 4x4/4 "patchify" conv x8 + 3x3 x8, stage 2 = 3x3/2 x16 + 3x3 x16, fc 32,
 pose 8, merge 32: 13,793 parameters and 0.22 MFLOP (110k multiply-adds) per grasp,
 1/1200 of GQ-CNN. The patchify stem matters more than the FLOPs: XLA's CPU convolution
-with one input channel is slow, a reshape + matmul is not. Measured (``benchmark``,
-2 pinned cores of an idle host, jax 0.11.2 CPU): ~810 sets of 64 scored/s one set per
-call, ~1,130/s 16 sets per call (crops + network); 5x5/2-stem variants of the same
-width ran at 330-500 sets/s.
+with one input channel is slow, a reshape + matmul is not (``sern bench grasp`` measures
+the network's rates: :func:`sern_jax.bench.grasp.quality_net_benchmark`).
 
 Parameters. ``init(key)`` returns ``QualityParams(net, normalizer)``: ``net`` is the flax
 variables dict, ``normalizer`` a ``Normalizer`` of four scalars (GQ-CNN's ``im_mean,
@@ -54,8 +52,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from sern_jax.infra import timing
 from sern_jax.core.types import Network
+from sern_jax.learners import base as lbase
+from sern_jax.learners.base import LOSSES, bce_loss, l1_loss
 
 __all__ = [
     "CONV_IMPLS",
@@ -67,11 +66,11 @@ __all__ = [
     "QualityParams",
     "TrainData",
     "bce_loss",
-    "benchmark",
     "fit_normalizer",
     "flops_per_grasp",
     "init_opt_state",
     "l1_loss",
+    "learner_model",
     "make_fit",
     "make_quality_network",
     "make_train_step",
@@ -470,65 +469,9 @@ def flops_per_grasp(config: QualityNetConfig) -> int:
 
 
 # ----------------------------------------------------------------------------- losses
-
-
-def _weighted_mean(values, weights):
-    if weights is None:
-        return jnp.mean(values)
-    weights = jnp.asarray(weights, values.dtype)
-    return jnp.sum(weights * values) / jnp.maximum(jnp.sum(weights), 1e-12)
-
-
-def bce_loss(logits, labels, weights=None):
-    """Weighted binary cross-entropy on logits (the default loss).
-
-    BCE is a strictly proper scoring rule for Bernoulli outcomes: its expected value is
-    minimised by r̂ = P(success | crop), so the network estimates a success probability,
-    which the softmax policy and the theory (r̂ ∈ [0, 1] as an expected reward) need.
-    Computed stably from logits (``optax.sigmoid_binary_cross_entropy``).
-
-    Args:
-      logits: [N] network logits.
-      labels: [N] rewards in {0, 1} (or frequencies in [0, 1]).
-      weights: optional [N] >= 0 per-example weights (0 = padding).
-
-    Returns:
-      [] sum(w * loss) / sum(w) (0 when all weights are 0).
-    """
-    labels = jnp.asarray(labels, logits.dtype)
-    return _weighted_mean(optax.sigmoid_binary_cross_entropy(logits, labels), weights)
-
-
-def l1_loss(logits, labels, weights=None):
-    """Weighted L1 loss |R - r̂| with r̂ = sigmoid(logit): the printed Algorithm 1's loss.
-
-    Kept as a negative control only. The expected L1 loss is minimised by the conditional
-    *median* of R, and the median of a Bernoulli(p) reward is 0 or 1 (1 iff p > 1/2), so
-    L1 drives r̂ towards 0/1 votes rather than the success probability p; its gradient is
-    also flat in the error size. BCE is the default for that reason.
-
-    Args:
-      logits: [N] network logits.
-      labels: [N] rewards in {0, 1}.
-      weights: optional [N] >= 0 per-example weights (0 = padding).
-
-    Returns:
-      [] sum(w * |R - r̂|) / sum(w).
-    """
-    labels = jnp.asarray(labels, logits.dtype)
-    return _weighted_mean(jnp.abs(labels - jax.nn.sigmoid(logits)), weights)
-
-
-LOSSES = {"bce": bce_loss, "l1": l1_loss}
-
-
-def _loss_fn(loss):
-    if callable(loss):
-        return loss
-    if loss not in LOSSES:
-        raise ValueError(f"unknown loss {loss!r}; known: {sorted(LOSSES)}")
-    return LOSSES[loss]
-
+#
+# The losses are the learners' (:mod:`sern_jax.learners.base`): ``bce_loss`` (the default, a
+# proper scoring rule) and ``l1_loss`` (Algorithm 1's printed loss, a negative control).
 
 # ----------------------------------------------------------------------------- training
 
@@ -550,6 +493,22 @@ def _check_data(data: TrainData, s: int) -> None:
             raise ValueError(f"TrainData.{name} must be [{n}], got {shape}")
 
 
+def _net(params: QualityParams):
+    return params.net
+
+
+def _with_net(params: QualityParams, net) -> QualityParams:
+    return QualityParams(net, params.normalizer)
+
+
+def learner_model(network: QualityNetwork) -> lbase.Model:
+    """The quality network as a learner's :class:`~sern_jax.learners.base.Model`: inputs
+    (crop image [..., S, S], grasp depth [...]); only ``params.net`` is trained (the input
+    normaliser is not)."""
+    return lbase.Model(network.init, network.apply, network.logits, network.features,
+                       trainable=_net, merge=_with_net)
+
+
 def make_train_step(
     network: QualityNetwork,
     optimizer: optax.GradientTransformation,
@@ -565,24 +524,15 @@ def make_train_step(
     Returns:
       ``train_step(params, opt_state, batch: TrainData) -> (params, opt_state, loss)``,
       pure (jit it); the loss is the batch's weighted mean before the update, and rows
-      with weight 0 (padding of a last, short shard) contribute nothing.
+      with weight 0 (padding of a last, short shard) contribute nothing. The learners' step
+      (:func:`sern_jax.learners.base.make_train_step`) on :func:`learner_model`.
     """
-    loss_fn = _loss_fn(loss)
+    step = lbase.make_train_step(learner_model(network), optimizer, loss)
     s = network.config.crop_size
 
     def train_step(params: QualityParams, opt_state, batch: TrainData):
         _check_data(batch, s)
-
-        def objective(net):
-            p = QualityParams(net, params.normalizer)
-            return loss_fn(
-                network.logits(p, batch.image, batch.depth), batch.label, batch.weight
-            )
-
-        value, grads = jax.value_and_grad(objective)(params.net)
-        updates, opt_state = optimizer.update(grads, opt_state, params.net)
-        net = optax.apply_updates(params.net, updates)
-        return QualityParams(net, params.normalizer), opt_state, value
+        return step(params, opt_state, (batch.image, batch.depth), batch.label, batch.weight)
 
     return train_step
 
@@ -595,6 +545,9 @@ def make_fit(
     num_steps: int = 16,
 ):
     """``num_steps`` minibatch steps in one ``lax.scan``: pure, jit- and vmap-able.
+
+    The learners' weighted-minibatch fit (:func:`sern_jax.learners.base.make_fit`) on
+    :func:`learner_model`, over a :class:`TrainData` buffer.
 
     Args:
       network: from ``make_quality_network``.
@@ -613,122 +566,12 @@ def make_fit(
       ``mean_loss`` is 0. vmap ``fit`` over (key, params, opt_state[, data]) to train
       independent copies.
     """
-    if not isinstance(batch_size, (int, np.integer)) or batch_size < 1:
-        raise ValueError(f"batch_size must be an int >= 1, got {batch_size!r}")
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
-    train_step = make_train_step(network, optimizer, loss)
+    fit = lbase.make_fit(learner_model(network), optimizer, loss, batch_size, num_steps)
     s = network.config.crop_size
 
-    def fit(key: jax.Array, params: QualityParams, opt_state, data: TrainData):
+    def fit_buffer(key: jax.Array, params: QualityParams, opt_state, data: TrainData):
         _check_data(data, s)
-        n = data.weight.shape[0]
-        weight = jnp.maximum(jnp.asarray(data.weight, jnp.float32), 0.0)
-        cdf = jnp.cumsum(weight)
-        total = cdf[-1]
-        has_data = total > 0
-        u = jax.random.uniform(key, (num_steps, batch_size)) * total
-        idx = jnp.clip(jnp.searchsorted(cdf, u, side="right"), 0, n - 1)
-        ones = jnp.broadcast_to(has_data.astype(jnp.float32), (batch_size,))
+        rows = lbase.Data((data.image, data.depth), data.label, data.weight)
+        return fit(key, params, opt_state, rows)
 
-        def body(carry, idx_t):
-            params, opt_state = carry
-            batch = TrainData(
-                data.image[idx_t], data.depth[idx_t], data.label[idx_t], ones
-            )
-            new_params, new_opt_state, value = train_step(params, opt_state, batch)
-            keep = lambda new, old: jax.tree.map(
-                lambda a, b: jnp.where(has_data, a, b), new, old
-            )
-            return (keep(new_params, params), keep(new_opt_state, opt_state)), value
-
-        (params, opt_state), values = jax.lax.scan(body, (params, opt_state), idx)
-        return params, opt_state, jnp.mean(values)
-
-    return fit
-
-
-# ----------------------------------------------------------------------------- speed
-
-
-def _synthetic_sets(num_sets: int, num_candidates: int, size: int = 96):
-    """Depth images of a box on a table and random candidates (host side, fixed seed)."""
-    rng = np.random.default_rng(0)
-    images = np.full((num_sets, size, size), 0.6, np.float32)
-    images[:, 30:66, 38:58] = 0.55
-    center = rng.uniform(20, size - 20, (num_sets, num_candidates, 2)).astype(
-        np.float32
-    )
-    angle = rng.uniform(-np.pi / 2, np.pi / 2, (num_sets, num_candidates))
-    gdepth = rng.uniform(0.56, 0.59, (num_sets, num_candidates))
-    return images, (center, angle.astype(np.float32), gdepth.astype(np.float32))
-
-
-def benchmark(
-    config: QualityNetConfig = QualityNetConfig(),
-    num_sets: int = 16,
-    batch_size: int = 64,
-    num_candidates: int = 64,
-    min_time: float = 1.0,
-) -> dict:
-    """Measures scoring and training rates on this machine (jitted, after compiling).
-
-    Scoring: ``num_sets`` 96x96 depth images x ``num_candidates`` candidates per call,
-    crops (``crops.extract_batch``) + network, one jitted call. Training: one Adam step
-    (``make_train_step``, BCE) on a minibatch of ``batch_size`` crops.
-
-    Args:
-      config: network shape.
-      num_sets: candidate sets (images) scored per call.
-      batch_size: training minibatch size.
-      num_candidates: candidates per set (K).
-      min_time: seconds spent timing each rate.
-
-    Returns:
-      dict: sets_scored_per_s, grasps_scored_per_s, sets_per_call, num_candidates,
-      train_steps_per_s, train_examples_per_s, train_batch_size, params,
-      flops_per_grasp, gqcnn_params, gqcnn_flops_per_grasp, jax_backend.
-    """
-    from sern_jax.grasp.world import crops as crops_lib
-
-    net = make_quality_network(config)
-    params = net.init(jax.random.key(0))
-    crop_config = crops_lib.CropConfig(crop_size=config.crop_size)
-    images, cands = _synthetic_sets(num_sets, num_candidates)
-
-    @jax.jit
-    def score(params, images, cands):
-        c = crops_lib.extract_batch(images, cands, crop_config)
-        return net.apply(params, c.image, c.depth)
-
-    args = (params, jnp.asarray(images), jax.tree.map(jnp.asarray, cands))
-    t_score = timing.time_calls(lambda: score(*args), repeats=3, min_calls=3,
-                                min_time=min_time / 3).median_s
-
-    optimizer = optax.adam(1e-3)
-    step = jax.jit(make_train_step(net, optimizer))
-    crops0 = crops_lib.extract_batch(*args[1:], crop_config)
-    rows = np.arange(batch_size) % (num_sets * num_candidates)
-    batch = TrainData(
-        crops0.image.reshape(-1, config.crop_size, config.crop_size)[rows],
-        crops0.depth.reshape(-1)[rows],
-        jnp.asarray(rows % 2, jnp.float32),
-        jnp.ones((batch_size,), jnp.float32),
-    )
-    opt_state = init_opt_state(optimizer, params)
-    t_step = timing.time_calls(lambda: step(params, opt_state, batch)[2], repeats=3,
-                               min_calls=3, min_time=min_time / 3).median_s
-    return {
-        "sets_scored_per_s": num_sets / t_score,
-        "grasps_scored_per_s": num_sets * num_candidates / t_score,
-        "sets_per_call": num_sets,
-        "num_candidates": num_candidates,
-        "train_steps_per_s": 1.0 / t_step,
-        "train_examples_per_s": batch_size / t_step,
-        "train_batch_size": batch_size,
-        "params": param_count(config),
-        "flops_per_grasp": flops_per_grasp(config),
-        "gqcnn_params": param_count(GQCNN_2_0),
-        "gqcnn_flops_per_grasp": flops_per_grasp(GQCNN_2_0),
-        "jax_backend": jax.default_backend(),
-    }
+    return fit_buffer

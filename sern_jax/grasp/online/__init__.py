@@ -1,2 +1,4 @@
-"""Online grasp learning (Algorithm 1): the batched runner, the ask/tell robot loop
-(``asktell``), Ray units (``learn_units``) and the run's resource estimate (``budget``)."""
+"""Online grasp learning (Algorithm 1): the run's settings (``config``), random streams
+(``keys``), one round as pure functions (``step``), the host loop (``driver``: ``run``),
+results and checkpoint (``checkpoint``), the ask/tell robot loop (``asktell``), Ray units
+(``learn_units``) and the run's resource estimate (``budget``)."""

@@ -1,7 +1,7 @@
 """Algorithm 1 for a real robot loop: ``ask`` for a grasp, execute it, ``tell`` the reward.
 
 Any registered learner (``sern_jax.learners``) drives it, as one (object, seed) copy of the
-batched run (:func:`sern_jax.grasp.online.runner.run`) with the same keys and the same learner
+batched run (:func:`sern_jax.grasp.online.driver.run`) with the same keys and the same learner
 state: given the same depth images it asks for the same grasps and, told the same rewards,
 makes the same updates (tests/grasp/test_asktell.py drives both with the simulator, for
 every registered learner). After every ``config.explore`` tells the learner's ``update``
@@ -21,7 +21,9 @@ import numpy as np
 from sern_jax.infra import io
 from sern_jax.core import policies as pol
 from sern_jax.grasp.model import artifacts
-from sern_jax.grasp.online import runner
+from sern_jax.grasp.online import checkpoint, step
+from sern_jax.grasp.online import config as config_lib
+from sern_jax.grasp.online import keys as keys_lib
 from sern_jax.grasp.world import candidates as cand_lib
 from sern_jax.grasp.world import context as context_lib
 from sern_jax.grasp.world import crops as crops_lib
@@ -50,14 +52,14 @@ class AskTell:
     Args:
       config: the experiment settings (rounds, explore, the learners' hyperparameters, fit).
       policy: a registered learner name (``registry.names()``).
-      object_name: the name whose CRC32 keys the streams (as in ``runner.run``).
-      seed_index: which seed of ``runner.run`` this learner is.
+      object_name: the name whose CRC32 keys the streams (as in ``driver.run``).
+      seed_index: which seed of ``driver.run`` this learner is.
       theta0: the pretrained network (default: the shipped one).
-      learner: a Learner to use instead of the registered ``policy`` (as ``runner.run``'s
+      learner: a Learner to use instead of the registered ``policy`` (as ``driver.run``'s
         ``learners``).
     """
 
-    def __init__(self, config: runner.OnlineConfig, policy: str = "sern",
+    def __init__(self, config: config_lib.OnlineConfig, policy: str = "sern",
                  object_name: str = "object", seed_index: int = 0,
                  theta0: artifacts.Theta0 | None = None, learner: lbase.Learner | None = None):
         if learner is None:
@@ -68,17 +70,18 @@ class AskTell:
             raise ValueError(f"seed_index must be >= 0, got {seed_index}")
         self.config, self.policy = config, policy
         self.theta0 = theta0 or artifacts.load_theta0()
-        self.model = runner.quality_model(runner.copies_network(self.theta0.network.config))
-        self.learner = learner or runner.make_learner(config, policy, self.model)
-        self.key_os = runner.object_key(jax.random.key(config.seed), object_name, seed_index)
-        self.core = runner.core_data(config.core_set, self.theta0)
+        network = config_lib.copies_network(self.theta0.network.config)
+        self.model = config_lib.quality_model(network)
+        self.learner = learner or config_lib.make_learner(config, policy, self.model)
+        self.key_os = keys_lib.object_key(jax.random.key(config.seed), object_name, seed_index)
+        self.core = config_lib.core_data(config.core_set, self.theta0)
         self.context_config = context_lib.ContextConfig()
         self.crop_config = crops_lib.CropConfig()
         self._crops = jax.jit(lambda d, c: crops_lib.extract_batch(d, c, self.crop_config))
         self._init = jax.jit(self.learner.init)
         self._act = jax.jit(self.learner.act)
         self._update = jax.jit(self.learner.update)
-        predict = runner._predict(self.learner, self.model)
+        predict = step.predict_fn(self.learner, self.model)
         self._greedy = jax.jit(lambda state, obs: pol.sample_icdf(
             obs.u, pol.greedy_probs(predict(state, obs), mask=obs.valid), mask=obs.valid))
         self._sample = jax.jit(lambda k, d, p: cand_lib.sample(
@@ -86,7 +89,7 @@ class AskTell:
 
     def init(self) -> AskTellState:
         """θ0 (the learner's init with the batched run's key), an empty D, round 1."""
-        key = runner._stream(self.key_os, runner.INIT, 0)
+        key = keys_lib.stream(self.key_os, keys_lib.INIT, 0)
         state = self._init(key, self.theta0.params, self.core)
         return AskTellState(state, *self._empty_phase(), 1, 0, None)
 
@@ -101,7 +104,7 @@ class AskTell:
         camera = camera if camera is not None else depth_lib.overhead_params(
             self.context_config.camera)
         key_ctx = jax.random.fold_in(
-            runner._stream(self.key_os, runner.EXPLORE_CONTEXT, state.round_index),
+            keys_lib.stream(self.key_os, keys_lib.EXPLORE_CONTEXT, state.round_index),
             state.grasp_index)
         key = jax.random.fold_in(key_ctx, context_lib.CANDIDATE_STREAM)
         return jax.tree.map(np.asarray, self._sample(key, jnp.asarray(depth_image), camera))
@@ -131,16 +134,16 @@ class AskTell:
         cands = candidates if candidates is not None else self.candidates(
             state, depth_image, camera)
         r, e = state.round_index, state.grasp_index
-        u = jax.random.uniform(runner._stream(self.key_os, runner.POLICY_UNIFORM, r),
+        u = jax.random.uniform(keys_lib.stream(self.key_os, keys_lib.POLICY_UNIFORM, r),
                                (self.config.explore,))[e]
         obs, crops = self._obs(depth_image, cands, u, (r - 1) * self.config.explore + e)
-        key = jax.random.fold_in(runner._stream(self.key_os, runner.ACT, r), e)
+        key = jax.random.fold_in(keys_lib.stream(self.key_os, keys_lib.ACT, r), e)
         action, _, _ = self._act(key, state.learner, obs)
         slot = int(action)
         valid = np.asarray(cands.valid, bool)
         if not 0 <= slot < len(valid) or not valid[slot]:
             if valid.any() or slot != pol.NO_ARM:
-                raise runner.LearnerError(
+                raise config_lib.LearnerError(
                     f"learner {self.policy!r} returned no valid grasp (slot {slot}) while "
                     f"{int(valid.sum())} candidates were valid")
             # No valid candidate: this grasp slot passes with nothing stored, exactly as in
@@ -169,7 +172,7 @@ class AskTell:
         state = state._replace(phase_image=image, phase_depth=depth, phase_action=acts,
                                phase_reward=rewards, pending=None, grasp_index=e + 1)
         if state.grasp_index == self.config.explore:
-            key = runner._stream(self.key_os, runner.FIT, state.round_index)
+            key = keys_lib.stream(self.key_os, keys_lib.FIT, state.round_index)
             batch = lbase.Batch((jnp.asarray(image), jnp.asarray(depth)), jnp.asarray(acts),
                                 jnp.asarray(rewards))
             state = AskTellState(self._update(key, state.learner, batch), *self._empty_phase(),
@@ -193,7 +196,7 @@ class AskTell:
 
     def save(self, state: AskTellState, path: str | Path) -> None:
         """Writes the state to ``path`` (.npz, atomically), tagged with :meth:`identity`."""
-        arrays = runner.state_arrays(state.learner, "L_", self.config.horizon)
+        arrays = checkpoint.state_arrays(state.learner, "L_", self.config.horizon)
         arrays.update(phase_image=state.phase_image, phase_depth=state.phase_depth,
                       phase_action=state.phase_action, phase_reward=state.phase_reward)
         if state.pending is not None:
@@ -211,7 +214,7 @@ class AskTell:
                              "object, seed or θ0; make the learner with the settings it was "
                              "saved with")
         template = self.init()
-        learner = runner._state_from_arrays(saved, "L_", template.learner, self.config.horizon)
+        learner = checkpoint.state_from_arrays(saved, "L_", template.learner, self.config.horizon)
         pending = None
         if "pending_slot" in saved:
             pending = (int(saved["pending_slot"]), saved["pending_image"],

@@ -25,6 +25,7 @@ import os
 import shutil
 from pathlib import Path
 
+from sern_jax.infra import hosts
 from sern_jax.infra.io import fmt_bytes, fmt_time  # noqa: F401  (re-exported: budget.fmt_*)
 
 __all__ = [
@@ -83,10 +84,7 @@ def _largest(parts: dict[str, float]) -> str:
 
 
 def _cores() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
+    return hosts.usable_cores()
 
 
 def _seconds(trials: float, contexts: float, extra: float = 0.0) -> float:

@@ -1,12 +1,13 @@
-"""``sern grasp learn --ray``: each object's learner copies as one unit of work (issue 20).
+"""``sern grasp learn --ray``: each object's learner copies as one unit of work.
 
-The runner (:func:`sern_jax.grasp.online.runner.run`) batches every (object, learner, seed) copy of a
-run into one program per round. An object's copies depend on nothing another object does:
-their keys are ``object_key(key(seed), name, s)`` (by the object's name), their contexts,
-trials and learner updates are their own, and no step reduces over objects. So the run splits
-into one *unit* per object, each the runner's own run of that object alone, and joins back:
+The batched run (:func:`sern_jax.grasp.online.driver.run`) batches every (object, learner,
+seed) copy of a run into one program per round. An object's copies depend on nothing
+another object does: their keys are ``object_key(key(seed), name, s)`` (by the object's
+name), their contexts, trials and learner updates are their own, and no step reduces over
+objects. So the run splits into one *unit* per object, each the batched run of that object
+alone, and joins back:
 
-* a unit is :func:`run_unit`: ``runner.run(config, [spec], <out>/units/<unit>/)``, which
+* a unit is :func:`run_unit`: ``driver.run(config, [spec], <out>/units/<unit>/)``, which
   writes its own ``checkpoint.npz`` after every round (atomically, ``io.save_npz``) and
   resumes from it; then ``unit.json`` (its timings and trial counts);
 * :func:`run` (the driver) lists the units whose checkpoint is not finished, runs them as Ray
@@ -17,7 +18,7 @@ into one *unit* per object, each the runner's own run of that object alone, and 
   from it as it always does.
 
 Resume. Rerun the same command: finished units are kept, unfinished ones resume from their
-last round (the runner replays their updates). A run directory that a single-process run
+last round (the driver replays their updates). A run directory that a single-process run
 left part-way (its ``checkpoint.npz`` at round r) is split into unit checkpoints at round r
 first, so ``--ray`` continues it; a ``--ray`` run that stopped leaves the run directory's
 checkpoint at the round every unit has passed, so the command without ``--ray`` continues
@@ -42,7 +43,8 @@ import numpy as np
 
 from sern_jax.infra import io
 from sern_jax.grasp.model import artifacts
-from sern_jax.grasp.online import runner
+from sern_jax.grasp.online import checkpoint, driver
+from sern_jax.grasp.online import config as config_lib
 from sern_jax.grasp.world import objects as objects_lib
 
 __all__ = ["UNITS_DIR", "run", "run_unit", "unit_dir", "unit_name"]
@@ -64,12 +66,12 @@ def unit_dir(out_dir: str | Path, spec: objects_lib.ObjectSpec) -> Path:
     return Path(out_dir) / UNITS_DIR / unit_name(spec)
 
 
-def run_unit(config: runner.OnlineConfig, spec: objects_lib.ObjectSpec, out_dir: str,
+def run_unit(config: config_lib.OnlineConfig, spec: objects_lib.ObjectSpec, out_dir: str,
              theta0: artifacts.Theta0) -> None:
-    """One unit (a Ray task): the runner's run of object ``spec`` alone into ``out_dir``
+    """One unit (a Ray task): the batched run of object ``spec`` alone into ``out_dir``
     (resuming from its checkpoint), then ``unit.json`` with this call's timings and trial
     counts, written atomically."""
-    res = runner.run(config, [spec], out_dir, theta0=theta0, progress=False,
+    res = driver.run(config, [spec], out_dir, theta0=theta0, progress=False,
                      log=lambda line: None)
     io.save_json(Path(out_dir) / _UNIT_JSON,
                  {"object": spec.name, "fingerprint": res["fingerprint"],
@@ -88,32 +90,32 @@ def _load_checkpoint(path: Path, fingerprint: str, what: str, log) -> dict | Non
 
 def _split(saved: dict, o: int, path: Path, fingerprint: str) -> None:
     """Unit ``o``'s checkpoint cut from a single-process run's (object axis 1)."""
-    results = runner.RoundResults(*(np.asarray(saved[f])[:, o:o + 1]
-                                    for f in runner.RoundResults._fields))
+    results = checkpoint.RoundResults(*(np.asarray(saved[f])[:, o:o + 1]
+                                    for f in checkpoint.RoundResults._fields))
     rewards = np.asarray(saved["explore_reward"])[:, o:o + 1]
     path.parent.mkdir(parents=True, exist_ok=True)
-    runner._save(path, fingerprint, results, rewards, int(saved["next_round"]))
+    checkpoint.save(path, fingerprint, results, rewards, int(saved["next_round"]))
 
 
-def _join(unit_ckpts: list[dict]) -> tuple[runner.RoundResults, np.ndarray, int]:
+def _join(unit_ckpts: list[dict]) -> tuple[checkpoint.RoundResults, np.ndarray, int]:
     """The run's arrays from its units' (object axis 1), at the round every unit passed."""
     next_round = min(int(s["next_round"]) for s in unit_ckpts)
-    results = runner.RoundResults(*(np.concatenate([np.asarray(s[f]) for s in unit_ckpts],
+    results = checkpoint.RoundResults(*(np.concatenate([np.asarray(s[f]) for s in unit_ckpts],
                                                    axis=1)
-                                    for f in runner.RoundResults._fields))
+                                    for f in checkpoint.RoundResults._fields))
     rewards = np.concatenate([np.asarray(s["explore_reward"]) for s in unit_ckpts], axis=1)
-    results, rewards = runner._through(results, rewards, next_round)
+    results, rewards = checkpoint.through(results, rewards, next_round)
     return results, rewards, next_round
 
 
-def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
+def run(config: config_lib.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
         out_dir: str | Path, *, theta0: artifacts.Theta0, ray, progress: bool = True,
         log: Callable[[str], None] = print) -> dict:
     """Runs (or resumes) the learning run with one Ray task per object; returns what
-    :func:`runner.run` returns (``states`` None: the learner states stay in the tasks).
+    :func:`driver.run` returns (``states`` None: the learner states stay in the tasks).
 
     Args:
-      config, specs, theta0: as :func:`runner.run` (the default simulated world).
+      config, specs, theta0: as :func:`driver.run` (the default simulated world).
       out_dir: the run directory (the caller holds its lock).
       ray: a :class:`sern_jax.infra.distributed.RayConfig`.
 
@@ -131,7 +133,7 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
     names = [s.name for s in specs]
     if not names or len(set(names)) != len(names):
         raise ValueError(f"objects must be given and distinct, got {names}")
-    fingerprint = runner.run_fingerprint(config, list(specs), theta0)
+    fingerprint = config_lib.run_fingerprint(config, list(specs), theta0)
     num_r = config.rounds
     ckpt = out_dir / "checkpoint.npz"
     main = None
@@ -141,12 +143,12 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
             raise ValueError(f"{out_dir} holds a different learning run; choose another "
                              "--out or delete it")
     if main is not None and int(main["next_round"]) > num_r:  # finished: nothing to run
-        results = runner.RoundResults(*(main[f] for f in runner.RoundResults._fields))
+        results = checkpoint.RoundResults(*(main[f] for f in checkpoint.RoundResults._fields))
         return _outputs(config, names, fingerprint, results, {}, {"requested": 0,
                                                                   "simulated": 0}, {})
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [unit_dir(out_dir, s) / "checkpoint.npz" for s in specs]
-    prints = [runner.run_fingerprint(config, [s], theta0) for s in specs]
+    prints = [config_lib.run_fingerprint(config, [s], theta0) for s in specs]
     saved = [_load_checkpoint(p, f, out_dir, log) for p, f in zip(paths, prints)]
     if main is not None:  # a run started without --ray (or joined part-way): its units
         for o, (path, unit) in enumerate(zip(paths, saved)):
@@ -169,7 +171,7 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
         if all(s is not None for s in saved):
             results, rewards, next_round = _join(saved)
             if main is None or next_round > int(main["next_round"]):
-                runner._save(ckpt, fingerprint, results, rewards, next_round)
+                checkpoint.save(ckpt, fingerprint, results, rewards, next_round)
     if next_round <= num_r:  # a unit returned unfinished: a bug, never a partial table
         raise RuntimeError(f"--ray: the units stopped before round {num_r} finished (the "
                            f"slowest at round {next_round - 1}); rerun to resume")
@@ -185,8 +187,8 @@ def run(config: runner.OnlineConfig, specs: Sequence[objects_lib.ObjectSpec],
 
 
 def _outputs(config, names, fingerprint, results, timings, counts, reports) -> dict:
-    """What :func:`runner.run` returns for a finished run, from the joined arrays."""
-    rows = runner.table_rows(names, config.policies, results.paper_eval,
+    """What :func:`driver.run` returns for a finished run, from the joined arrays."""
+    rows = checkpoint.table_rows(names, config.policies, results.paper_eval,
                              results.lowvar_eval if config.eval_poses else None,
                              results.pseudo_regret if config.regret_trials else None)
     return {"table": rows, "results": results, "timings": timings, "trial_counts": counts,

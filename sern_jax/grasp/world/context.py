@@ -21,7 +21,9 @@ seed is 31 random bits of the pose stream.
 Threads: the resting poses of a batch (native MuJoCo, which releases the GIL while it steps)
 settle in a thread pool of :func:`context_threads` threads, each pose in its own ``MjData``
 with its own seed, so the poses, and everything computed from them, are the serial ones bit
-for bit (tested); ``SERN_CONTEXT_THREADS=1`` settles them one after another.
+for bit (tested); ``SERN_CONTEXT_THREADS=1``, or ``threads=1`` in a call, settles them one
+after another in the calling thread (what a caller that makes many batches in threads of its
+own, the online driver, asks for). Nothing here depends on which thread calls.
 
 Compiled code: one jitted ``render + sample`` function per (camera, candidate, noise)
 configuration, cached at module level, so calls with the same configuration, the same
@@ -49,6 +51,7 @@ from sern_jax.grasp.world import depth as depth_lib
 from sern_jax.grasp.world import depth_native
 from sern_jax.grasp.world import objects as objects_lib
 from sern_jax.grasp.world import scene as scene_lib
+from sern_jax.infra import hosts
 
 __all__ = [
     "POSE_STREAM",
@@ -246,35 +249,19 @@ def _geom_poses(model: mujoco.MjModel, poses: np.ndarray) -> depth_lib.GeomPoses
 
 
 def context_threads() -> int:
-    """Threads that settle the resting poses of one batch: ``SERN_CONTEXT_THREADS`` where
-    set, else ``SERN_CPU_THREADS`` (a Ray task's share: ``sern_jax.infra.distributed``), else the
-    cores this process may use."""
-    for name in ("SERN_CONTEXT_THREADS", "SERN_CPU_THREADS"):
-        value = os.environ.get(name, "").strip()
-        if value.isdigit() and int(value) >= 1:
-            return int(value)
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
+    """Threads that settle the resting poses of one batch (:func:`sern_jax.infra.hosts.context_threads`)."""
+    return hosts.context_threads()
 
 
 BACKGROUND_NICE = 10  # niceness of the context threads (made ahead of need)
-BACKGROUND_NICE_MIN_CORES = 8  # ... on hosts with at least this many usable cores
+BACKGROUND_NICE_MIN_CORES = hosts.MANY_CORES  # ... on hosts with at least this many usable cores
 
 
 def many_cores() -> bool:
-    """Whether this process may use at least ``BACKGROUND_NICE_MIN_CORES`` cores (the
-    cores it may run on, or its task's share ``SERN_CPU_THREADS`` where that is less):
-    where work made ahead of need runs at a lower priority (:func:`lower_priority`)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count() or 1
-    share = os.environ.get("SERN_CPU_THREADS", "").strip()
-    if share.isdigit() and int(share) >= 1:
-        cores = min(cores, int(share))
-    return cores >= BACKGROUND_NICE_MIN_CORES
+    """Whether this host counts as many-core (:func:`sern_jax.infra.hosts.many_cores`, at
+    ``BACKGROUND_NICE_MIN_CORES`` cores): where work made ahead of need runs at a lower
+    priority (:func:`lower_priority`)."""
+    return hosts.many_cores()
 
 
 def lower_priority() -> None:
@@ -318,10 +305,11 @@ def _pose_uniforms(seeds: jax.Array) -> jax.Array:
     return jax.vmap(lambda s: jax.random.uniform(jax.random.key(s), (5,)))(seeds)
 
 
-def _resting_poses(model: mujoco.MjModel, seeds: np.ndarray, config: ContextConfig
-                   ) -> np.ndarray:
-    """``scene.resting_pose`` of every seed [P] -> poses [P, 7], in threads (same values:
-    each pose has its own MjData and seed; the model is only read)."""
+def _resting_poses(model: mujoco.MjModel, seeds: np.ndarray, config: ContextConfig,
+                   threads: int | None = None) -> np.ndarray:
+    """``scene.resting_pose`` of every seed [P] -> poses [P, 7], in ``threads`` threads
+    (None: :func:`context_threads`; 1: in the calling thread). Same values either way: each
+    pose has its own MjData and seed; the model is only read."""
     seeds = np.asarray(seeds)
     u = np.asarray(_pose_uniforms(jnp.asarray(seeds, jnp.int32)), np.float64)
 
@@ -329,8 +317,8 @@ def _resting_poses(model: mujoco.MjModel, seeds: np.ndarray, config: ContextConf
         return scene_lib.resting_pose_from_uniforms(
             model, u[i], config.scene.xy_jitter, config.scene.settle_steps)
 
-    threads = min(len(seeds), context_threads())
-    if threads <= 1 or threading.current_thread().name.startswith("sern-context"):
+    threads = min(len(seeds), context_threads() if threads is None else threads)
+    if threads <= 1:
         return np.stack([one(i) for i in range(len(seeds))])
     return np.stack(list(_pool(threads).map(one, range(len(seeds)))))  # in order
 
@@ -364,12 +352,14 @@ def _contexts(
     model: mujoco.MjModel,
     config: ContextConfig,
     poses: np.ndarray | None = None,
+    threads: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, depth_lib.CameraParams, cand_lib.Candidates]:
     """Poses, depth, camera and candidates for context keys [P] in one scene (``poses``:
-    the keys' resting poses where already settled, :func:`resting_poses`)."""
+    the keys' resting poses where already settled, :func:`resting_poses`; ``threads``:
+    the settling threads otherwise)."""
     seeds, keys_noise, keys_cand = _streams(keys)
     if poses is None:
-        poses = _resting_poses(model, np.asarray(seeds), config)
+        poses = _resting_poses(model, np.asarray(seeds), config, threads)
     params = depth_lib.overhead_params(config.camera)
     if _renderer(config) == "native":
         # MuJoCo's C ray caster: the same image as depth.render (tests compare them) with
@@ -426,13 +416,20 @@ def resting_poses(
     num_poses: int,
     model: mujoco.MjModel,
     config: ContextConfig = ContextConfig(),
+    *,
+    threads: int | None = None,
 ) -> np.ndarray:
     """The resting poses [P, 7] of ``make_contexts(key, spec, num_poses, config, model)``:
     the batch's first stage (native MuJoCo on the CPU), so that a caller can settle poses
-    ahead of rendering them and pass them back as ``make_contexts(..., poses=)``."""
+    ahead of rendering them and pass them back as ``make_contexts(..., poses=)``.
+
+    ``threads``: how many threads settle them (None: :func:`context_threads`, in a pool of
+    this module; 1: one after another in the calling thread, what a caller that already
+    runs many batches in threads of its own asks for). The poses do not depend on it."""
     _check_key(key)
+    _check_threads(threads)
     seeds = _streams(_keys(key, int(num_poses)))[0]
-    return _resting_poses(model, np.asarray(seeds), config)
+    return _resting_poses(model, np.asarray(seeds), config, threads)
 
 
 def make_contexts(
@@ -442,6 +439,8 @@ def make_contexts(
     config: ContextConfig = ContextConfig(),
     model: mujoco.MjModel | None = None,
     poses: np.ndarray | None = None,
+    *,
+    threads: int | None = None,
 ) -> GraspContexts:
     """``num_poses`` grasp contexts of one object, rendered and sampled in one batch.
 
@@ -459,6 +458,8 @@ def make_contexts(
       poses: optional [P, 7] ``resting_poses(key, num_poses, model, config)``, settled
         ahead (the contexts are then the same as without it, bit for bit); None settles
         them here.
+      threads: the threads that settle the poses here (None: :func:`context_threads`;
+        1: in the calling thread); the contexts do not depend on it.
 
     Returns:
       GraspContexts(model [shared], poses [P, 7], depth [P, H, W], camera, candidates
@@ -487,7 +488,9 @@ def make_contexts(
             raise ValueError(f"poses must be finite float64 with shape ({num_poses}, 7) "
                              f"(resting_poses of the same key), got {poses.dtype} "
                              f"{poses.shape}")
-    poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config, poses)
+    _check_threads(threads)
+    poses, depth, camera, cands = _contexts(_keys(key, int(num_poses)), model, config, poses,
+                                            threads)
     return GraspContexts(
         model=model, poses=poses, depth=depth, camera=camera, candidates=cands
     )
@@ -504,3 +507,9 @@ def _check_key(key) -> None:
             f"{getattr(key, 'dtype', type(key).__name__)} "
             f"shape {getattr(key, 'shape', None)}"
         )
+
+
+def _check_threads(threads) -> None:
+    if threads is not None and (isinstance(threads, bool)
+                                or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise ValueError(f"threads must be an int >= 1 or None, got {threads!r}")

@@ -26,14 +26,14 @@ ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
 from sern_jax.grasp.world import objects
-from sern_jax.grasp.online import runner  # noqa: E402
+from sern_jax.grasp.online import driver  # noqa: E402
 from tests.grasp.conftest import make_tiny_theta0  # noqa: E402
 from tests.grasp.test_runner import CONFIG, OBJECT, params_digests, params_projections  # noqa: E402
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as out:
-        res = runner.run(CONFIG, [objects.make_object(OBJECT)], out, theta0=make_tiny_theta0(),
+        res = driver.run(CONFIG, [objects.make_object(OBJECT)], out, theta0=make_tiny_theta0(),
                          progress=False, log=lambda *_: None)
     arrays = {name: np.asarray(getattr(res["results"], name))
               for name in res["results"]._fields}

@@ -25,7 +25,8 @@ sys.path.insert(0, str(ROOT))
 
 from sern_jax.grasp.model import artifacts
 from sern_jax.grasp.world import objects
-from sern_jax.grasp.online import runner  # noqa: E402
+from sern_jax.grasp.online import config as online_config  # noqa: E402
+from sern_jax.grasp.online import driver  # noqa: E402
 
 
 def main() -> None:
@@ -33,12 +34,12 @@ def main() -> None:
     theta0 = artifacts.load_theta0()
     specs = [objects.make_object(n) for n in artifacts.hard_set(theta0)["objects"]]
     with tempfile.TemporaryDirectory() as out:
-        res = runner.run(runner.OnlineConfig(), specs, out, theta0=theta0, progress=False,
-                         log=lambda *_: None)
+        res = driver.run(online_config.OnlineConfig(), specs, out, theta0=theta0,
+                         progress=False, log=lambda *_: None)
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()
     ref = {
-        "command": "python tests/grasp/data/make_table1_reference.py (runner.run with "
+        "command": "python tests/grasp/data/make_table1_reference.py (driver.run with "
                    "OnlineConfig() on artifacts.hard_set: the defaults of sern grasp learn)",
         "commit": f"{commit} (the runner and the 20 N theta0 of 2026-11-24)",
         "machine": f"{platform.platform()}, {os.cpu_count()} CPUs, load average "

@@ -103,11 +103,15 @@ def table(head: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def link(path: Path | str, page: str = "docs") -> str:
-    """A link to a record from a page under docs/ (or the README), as the site resolves it:
-    records sit outside docs/, so the link goes to the repository file."""
+def link(path: Path | str) -> str:
+    """A link to a record in the repository (``repo_url`` of mkdocs.yml): records sit outside
+    docs/, which the site's relative links cannot reach."""
     rel = Path(path).resolve().relative_to(ROOT).as_posix()
-    return f"`{rel}`"
+    m = re.search(r"^repo_url:\s*(\S+)", (ROOT / "mkdocs.yml").read_text(), re.M)
+    if not m:
+        return f"`{rel}`"
+    kind = "tree" if (ROOT / rel).is_dir() else "blob"
+    return f"[`{rel}`]({m.group(1).rstrip('/')}/{kind}/main/{rel})"
 
 
 def _json(path: Path) -> dict:
@@ -122,27 +126,25 @@ POLICY = {"sern": "SERN", "egreedy": "ε-greedy", "greedy": "greedy"}
 @functools.cache
 def learning(setting: str) -> dict:
     """A grasp-learning setting's summary, recomputed from its per-seed files."""
-    from experiments import grasp_learning as gl
+    from sern_jax.experiments import grasp_learning as gl
 
     return json.loads(json.dumps(gl.summarise(RESULTS / setting, write=False)))
 
 
 @functools.cache
 def learning_arrays(setting: str) -> dict:
-    from experiments import grasp_learning as gl
+    from sern_jax.experiments import grasp_learning as gl
 
     return gl.load_results(RESULTS / setting)
 
 
 def _comp(summary: dict, family: str, name: str) -> dict:
-    from experiments import grasp_learning as gl
-
-    (c,) = [c for c in summary["comparisons"][family] if gl._short(c["name"]) == name]
+    (c,) = [c for c in summary["comparisons"][family] if _short(c["name"]) == name]
     return c
 
 
 def _short(name: str) -> str:
-    from experiments import grasp_learning as gl
+    from sern_jax.experiments import grasp_learning as gl
 
     return gl._short(name)
 
@@ -152,7 +154,7 @@ def _label(name: str) -> str:
     out = name
     for k, v in (("egreedy", "ε-greedy"), ("sern", "SERN")):
         out = re.sub(rf"\b{k}\b", v, out)
-    return out.replace(" − ", " − ")
+    return out
 
 
 def comparison_table(summary: dict, family: str, unit: str = "points") -> str:
@@ -196,7 +198,7 @@ def _strong_facts() -> dict:
 def _sensitivity_explore() -> dict:
     """Exploration success, SERN − peer, in every world of the grid (rounds 1–5, mean over
     the objects per seed), Holm over the 16 comparisons."""
-    from experiments import grasp_sensitivity as gs
+    from sern_jax.experiments import grasp_sensitivity as gs
     from sern_jax.analysis import stats
 
     docs = learning_arrays("sensitivity")
@@ -261,7 +263,7 @@ def _forgetting() -> dict:
 
 @functools.cache
 def _forgetting_summary(folder: str) -> dict:
-    from experiments import core_set_forgetting as csf
+    from sern_jax.experiments import core_set_forgetting as csf
 
     return json.loads(json.dumps(csf.summarise(_json(RESULTS / folder / "results.json"))))
 
@@ -271,7 +273,7 @@ def _theory_grasping(folder: str) -> dict:
     """The summary of a theory-on-grasping run from its per-context file, with the
     per-object slope tested one-sided: H0 slope ≤ −1/2 (the rate Assumption 3 asks for or
     faster) against slope > −1/2, Holm over the run's objects."""
-    from experiments import theory_on_grasping as tog
+    from sern_jax.experiments import theory_on_grasping as tog
     from sern_jax.analysis import stats
 
     path = RESULTS / folder / "per_context.npz"
@@ -382,7 +384,7 @@ def results_glance() -> str:
 
 @block("results-paper-se")
 def results_paper_se() -> str:
-    from experiments import paper_table1
+    from sern_jax.experiments import paper_table1
 
     res = paper_table1.check()
     s = res["statistics"]
@@ -563,7 +565,7 @@ def _bl_name(k: str) -> str:
 
 @functools.cache
 def _baselines() -> dict:
-    from experiments import grasp_baselines as gb
+    from sern_jax.experiments import grasp_baselines as gb
     from sern_jax.analysis import stats
 
     out = RESULTS / "grasp_baselines"
@@ -1101,11 +1103,11 @@ def theory_verdicts() -> str:
          f"{f['t3_pass']} of {f['t3_cells']} configurations pass; the proof's a_t term fails "
          f"under selection bias (ratio up to {f['selection'][0]:.2f} against ≤ 1)"],
         ["Theorem 4: bound with α = α0/ln(T^p)", "**loose (vacuous) for α0 ≥ 1; false for "
-         "α0 < 1**", f"all {f['t4_vacuous']} of {f['t4_cells']} cells vacuous at feasible T; "
+         "small α0**", f"all {f['t4_vacuous']} of {f['t4_cells']} cells vacuous at feasible T; "
          "an analytic certificate exceeds the bound for α0 = 0.1"],
         ["Theorem 5: R_T/T → 0 for p < 1/3",
-         "**holds for α0 ≥ p·g, only at rate T/ln T; false "
-         "for small α0**", f"worst case R_T·p ln T/(α0 T) = {f['t5_rate']:.4f} exactly; at a "
+         "**holds for Algorithm 1's α0 = 1, only at rate "
+         "T/ln T; false for α0 < p·g**", f"worst case R_T·p ln T/(α0 T) = {f['t5_rate']:.4f} exactly; at a "
          f"fixed α (the experiments) R_T/T = {f['fixed_alpha']:.4f} for every T"],
         ["Assumption 3 on a learned network", "**false at its rate**",
          "error slope against n + 1: " + ", ".join(_num(s, 2) for s in a3_slopes)
@@ -1204,7 +1206,8 @@ def readme_grasping() -> str:
         f"SERN − ε-greedy {pts(f['e']['mean'])} {interval(f['e']['lower'], f['e']['upper'])} "
         "(95 % t intervals; neither resolved). "
         "[Results](docs/RESULTS.md#sern-against-its-peers-20-seeds)",
-        f"* This holds for this object set: θ0 is already near the ceiling on five of the six; "
+        "* This holds for this object set: on five of the six objects every policy ends near "
+        f"the ceiling ({pct(min(f['fill_final']), 0)}–{pct(max(f['fill_final']), 0)}); "
         f"on the one hard object SERN − greedy is {pts(f['g_hard']['mean'])} "
         f"{interval(f['g_hard']['lower'], f['g_hard']['upper'])}. "
         "[Results](docs/RESULTS.md#findings-at-a-glance)",
@@ -1224,8 +1227,8 @@ def readme_theory() -> str:
             ["2 (tail of the counts)",
              f"holds, loose: constant ≥ {f['kappa_min']:.2f} against 1/8"],
             ["3 (regret decomposition)", "inequality holds; proof needs stronger assumptions"],
-            ["4 (bound under α0/ln(T^p))", "vacuous for α0 ≥ 1; false for α0 < 1"],
-            ["5 (no regret)", "holds for α0 ≥ 1 at rate T/ln T; false for small α0"]]
+            ["4 (bound under α0/ln(T^p))", "vacuous for α0 ≥ 1; false for small α0"],
+            ["5 (no regret)", "holds for α0 = 1, at rate T/ln T; false for small α0"]]
     return table(["theorem", "verdict ([details](docs/THEORY.md#verdicts))"], rows)
 
 
@@ -1286,13 +1289,8 @@ def _wall(record: dict) -> float:
 # ----------------------------------------------------------------------------- performance
 
 
-def _hardware(machine: dict | str) -> str:
+def _hardware(machine: dict) -> str:
     """The hardware in hardware words, from a record's machine block."""
-    if isinstance(machine, str):
-        text = machine
-        if "EPYC" in text:
-            return "2-core AMD EPYC"
-        return text
     cpu = machine.get("cpu", "")
     gpu = machine.get("jax_devices") or machine.get("devices") or []
     backend = machine.get("jax_backend") or machine.get("backend")
@@ -1357,13 +1355,6 @@ def performance_commands() -> str:
                  f"{(tv['user_s'] + tv['system_s']) / tv['wall_s']:.1f} cores busy on average; "
                  f"peak RSS {tv['max_rss_gb']:.1f} GB",
                  "one NVIDIA H100 (16 Intel Xeon host cores for the trials)", link(sp)])
-    bp = RESULTS / "grasp_baselines" / "meta.json"
-    meta = _json(bp)
-    secs = _baselines_seconds(meta)
-    if secs is not None:
-        rows.append(["`python -m experiments.grasp_baselines run --seeds 20` (11 learners × 6 "
-                     "objects × 20 seeds)", _clock(secs), "the comparison alone",
-                     "one NVIDIA H100 (16 Intel Xeon host cores for the trials)", link(bp)])
     cp = RESULTS / "theory" / "check_full.json"
     doc = _check_full()
     rows.append(["`sern check`, full size (28 checks)", _clock(doc["wall_s"]),
@@ -1372,23 +1363,12 @@ def performance_commands() -> str:
     return table(["command", "wall time", "notes", "hardware", "record"], rows)
 
 
-def _baselines_seconds(meta: dict) -> float | None:
-    for key in ("run_seconds", "seconds"):
-        if isinstance(meta.get(key), (int, float)):
-            return float(meta[key])
-    calls = meta.get("device_calls")
-    if isinstance(calls, dict) and isinstance(calls.get("run_seconds"), (int, float)):
-        return float(calls["run_seconds"])
-    return None
-
-
 @block("performance-simulator")
 def performance_simulator() -> str:
     rows = []
     for name in ("rate_native_2core.json", "rate_mjx_gpu.json"):
         path = RESULTS / "trial_rate" / name
         d = _json(path)
-        m = d["machine"]
         for backend, rec in d["backends"].items():
             for b in rec["batches"]:
                 if backend == "native":
@@ -1399,7 +1379,6 @@ def performance_simulator() -> str:
                     what = f"MJX (compile {rec['compile_s']:.0f} s)"
                 rows.append([what, f"{b['batch']:,}", f"{b['trials_per_s']:,.0f}", hw,
                              link(path)])
-        del m
     return table(["backend", "batch", "trials/s", "hardware", "record"], rows)
 
 

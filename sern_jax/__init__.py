@@ -9,7 +9,7 @@ The folder tree is the architecture (docs/ARCHITECTURE.md); imports point one wa
 * ``grasp``: the MuJoCo/MJX grasp world, the quality network, online grasp learning;
 * ``experiment``: what ``sern regret`` and ``sern reproduce`` run;
 * ``infra``: run directories, Ray, meshes, timing, flag checks; ``bench``: ``sern bench``;
-* ``commands``: the ``sern`` CLI.
+* ``commands``: the ``sern`` CLI (not re-exported here: the library never imports it).
 
 ``import sern_jax`` imports none of them (so ``sern --help`` stays instant); each subpackage
 loads on first use, like ``from sern_jax.engine import drive``.
@@ -23,13 +23,13 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _MODULES = ("core", "analysis", "learners", "engine", "grasp", "experiment", "infra",
-            "bench", "commands")
+            "bench")
 
 __all__ = ["__version__", *_MODULES]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the packages load lazily
-    from sern_jax import (analysis, bench, commands, core, engine, experiment,  # noqa: F401
-                          grasp, infra, learners)
+    from sern_jax import (analysis, bench, core, engine, experiment, grasp,  # noqa: F401
+                          infra, learners)
 
 
 def __getattr__(name: str):

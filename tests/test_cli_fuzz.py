@@ -355,7 +355,7 @@ from hypothesis import strategies as st  # noqa: E402
 NEURAL = ["regret", "--estimator", "neural", "--problem", "wheel", "--horizon", "50",
           "--seeds", "2", "--no-progress", "--no-figures", "--out", "run"]
 BENCH_NEURAL = ["bench", "neural", "--json", "--seeds", "2", "--horizon", "50",
-                "--loop-seeds", "0", "--repeats", "0"]
+                "--loop-seeds", "0", "--loop-rounds", "50", "--repeats", "0"]
 EXPERIMENT = ["experiment"]
 # one valid, small command line per command and mode (the flags under test are appended)
 BASES = {
@@ -389,7 +389,8 @@ _LIST_JUNK = st.one_of(st.sampled_from([",", ",,", "a,,b", ",x", "x,", " , ", "1
                        .map(lambda items: ",".join(items[:1] + [""] + items[1:])))
 _NAME_JUNK = st.text(alphabet="abcdefghijklmnopqrstuvwxyz_", min_size=1,
                      max_size=10).map(lambda t: "zz" + t)
-_BAD_OUTPUT = st.sampled_from(["/proc/x/y", "/proc/x", "a_file/x", "a_file", "/proc"])
+# refused as a file and as a directory alike (a_file itself is a valid output file)
+_BAD_OUTPUT = st.sampled_from(["/proc/x/y", "/proc/x", "a_file/x", "/proc"])
 _BAD_INPUT = st.sampled_from(["no_such_dir", "a_file", "/proc/no_such"])
 
 

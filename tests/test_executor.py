@@ -244,17 +244,17 @@ MODULES = _modules()
 
 
 def _imports(module: str) -> set[str]:
-    """Every module ``module`` imports, at any depth (function-level too); ``from p import
-    n`` counts as p and, where it is a module, p.n."""
+    """Every module ``module`` imports, at any depth (function-level too): ``from p import
+    n`` counts as p.n where that is a module, else as p."""
     tree = ast.parse(MODULES[module].read_text())
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.add(node.module)
-            names.update(f"{node.module}.{a.name}" for a in node.names
-                         if f"{node.module}.{a.name}" in MODULES)
+            for a in node.names:
+                sub = f"{node.module}.{a.name}"
+                names.add(sub if sub in MODULES else node.module)
     return names
 
 

@@ -45,6 +45,20 @@ def test_batched_equals_unbatched_and_seed_alone_equals_seed_among_many(wheel_se
                                    err_msg=field)
 
 
+def test_chunked_calls_through_the_seed_driver_report_progress(wheel_sern):
+    # three padded calls of 2 seeds (the one seed driver's loop): the same seeds as one call
+    run, _ = wheel_sern
+    one = nr.run_seeds(run, seed=7, num_seeds=6, chunk_size=6)
+    seen = []
+    chunked = nr.run_seeds(run, seed=7, num_seeds=5, chunk_size=2, progress=seen.append)
+    assert seen == [2, 4, 5]
+    assert chunked.counts.shape == (5,) + one.counts.shape[1:] and chunked.diag is None
+    np.testing.assert_array_equal(chunked.counts, one.counts[:5])
+    for field in ("regret", "regret_rb", "compensator", "min_prob"):
+        np.testing.assert_allclose(getattr(chunked, field), getattr(one, field)[:5],
+                                   rtol=1e-6, atol=1e-6, err_msg=field)
+
+
 def test_common_random_numbers_and_uniform_regret():
     # uniform's expected per-round regret on the wheel is closed form: outside the disc
     # 50 - (50 + 3 + 1.2)/5, inside 1.2 - (4 + 1.2)/5; P(outside) = 1 - δ²

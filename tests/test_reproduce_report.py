@@ -15,3 +15,25 @@ def test_table_prints_the_standard_error_and_says_so():
     assert "| o | sern | 30 % | 45 % | 85 % |" in md
     one_seed = [dict(rows[0], se=[None, None])]
     assert "| 40 % | 80 % |" in reproduce._table_markdown(one_seed)
+
+
+def test_paired_lines_print_the_t_half_width_and_say_so(tmp_path):
+    import json
+
+    import numpy as np
+
+    from sern_jax.analysis import stats
+    from sern_jax.infra import io
+
+    rng = np.random.default_rng(0)
+    lowvar = rng.random((3, 2, 3, 6))  # [round, object, policy, seed]
+    paper = rng.random((3, 2, 3, 6))
+    io.save_npz(tmp_path / "results.npz", lowvar_eval=lowvar, paper_eval=paper)
+    (tmp_path / "config.json").write_text(json.dumps(
+        {"config": {"policies": ["sern", "egreedy", "greedy"]}}))
+    lines = reproduce._paired_lines(tmp_path)
+    assert "± is the 95 % Student-t half-width" in lines[0] and "Holm over the 4" in lines[0]
+    pooled = lowvar[-1].mean(0)
+    want = stats.paired_differences(100 * (pooled[0] - pooled[2]))[0]
+    assert f"SERN − greedy, fixed-pose evaluation: {want.mean:+.1f} ± {want.half:.1f}" in \
+        "\n".join(lines)

@@ -134,7 +134,10 @@ def run(args) -> int:
                                                              "--context-poses")),
             threads=args.threads, repeats=1 if quick else args.repeats,
             quality_sets=args.quality_sets, quality_batch=args.quality_batch)
-        objects_lib.resolve_object(args.object)
+        try:
+            objects_lib.resolve_object(args.object)
+        except (ValueError, OSError) as e:
+            raise ValueError(f"--object: {e}") from None
     except ValueError as e:
         print(f"sern bench grasp: {e}", file=sys.stderr)
         return 2

@@ -48,8 +48,7 @@ def run(args) -> int:
     module = script_module("experiments", args.name)
     main = getattr(module, "main", None)
     if main is None:
-        raise ValueError(f"NAME: experiments.{args.name} has no command line of its own"
-                         + (" (use `sern regret`)" if args.name == "regret" else ""))
+        raise ValueError(f"NAME: experiments.{args.name} has no command line of its own")
     argv0, sys.argv[0] = sys.argv[0], f"sern experiment {args.name}"  # the usage line's name
     try:
         return int(main(list(args.args)) or 0)

@@ -78,7 +78,8 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=_positive_int, default=1,
                    help="trials per grasp (1 = one Bernoulli label; more = frequencies)")
     p.add_argument("--backend", choices=("native", "mjx"), default="native")
-    p.add_argument("--objects-per-shard", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--objects-per-shard", type=validate.int_in(1, 100_000), default=None,
+                   metavar="N",
                    help="objects per shard file, the unit of resume and of --ray tasks "
                         "(default 10; 1 keeps many Ray workers evenly busy: docs/CLUSTER.md); "
                         "the shards of one object hold the same arrays whatever N")
@@ -275,7 +276,12 @@ def _specs(names, meshes, default_names, units="auto"):
 
     names = list(names) or ([] if meshes else list(default_names))
     specs = [objects.resolve_object(n, units=units) for n in names]
-    specs += [objects.load_mesh(m, units=units) for m in meshes]
+    for m in meshes:
+        try:
+            specs.append(objects.load_mesh(m, units=units))
+        except (ValueError, OSError) as exc:
+            text = str(exc) if isinstance(exc, ValueError) else (exc.strerror or str(exc))
+            raise ValueError(text if "--mesh" in text else f"--mesh {m}: {text}") from None
     if not specs:
         raise ValueError("no objects given")
     seen = set()
@@ -348,7 +354,7 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
                         "grasps of each round only and scale their pseudo-regret by "
                         "--explore / G (an unbiased estimate at G / --explore of the "
                         "cost); 0 = every grasp")
-    p.add_argument("--fit-steps", type=_positive_int, default=40)
+    p.add_argument("--fit-steps", type=validate.int_in(1, 100_000), default=40)
     p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp")
     p.add_argument("--loss", choices=("bce", "l1"), default="bce")
     p.add_argument("--theta0", default=None, help="θ0 directory (default: the shipped one)")

@@ -135,6 +135,9 @@ def _missing(parser: argparse.ArgumentParser) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from sern_jax.infra import hosts
+
+    hosts.use_deterministic_xla()  # before any JAX backend starts: reruns on a GPU give the same bits
     parser = build_parser()
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):

@@ -177,8 +177,8 @@ def _paired_lines(learn_dir: Path) -> list[str]:
     rows = stats.paired_differences(np.stack(diffs), names=names, level=0.95)
     num_o = res["paper_eval"].shape[1]
     lines = [f"grasp learning: SERN − peer, final round, mean over {num_o} objects, paired "
-             f"over {num_s} seeds (95 % Student-t intervals; Holm over the {len(rows)} "
-             "differences listed):"]
+             f"over {num_s} seeds (± is the 95 % Student-t half-width, as docs/RESULTS.md "
+             f"prints it; Holm over the {len(rows)} differences listed):"]
     for r in rows:
         verdict = "sign resolved" if r.resolved else "not resolved after Holm"
         lines.append(f"                {r.name}: {r.mean:+.1f} ± {r.half:.1f} points, "

@@ -278,6 +278,12 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
     a δ sweep share one compilation per policy (:func:`run_delta_sweep`).
     """
     run_dir = Path(out_dir)
+    from sern_jax.infra import validate
+
+    validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind; before any jax
+    _check(exp)  # the flags, the size budget and the run directory before anything is traced
+    est = check_fits(exp, run_dir)
+    _check_run_dir(exp, run_dir)
     params = None
     if sweep_cache is not None and exp.problem == "wheel":
         from sern_jax.core import contextual_problems as cp
@@ -285,20 +291,14 @@ def run_experiment(exp: NeuralRegretExperiment, out_dir: str | Path, *, progress
         key = dataclasses.replace(exp, delta=0.5, chunk_size=1).fingerprint()
         if key not in sweep_cache:
             sweep_cache[key] = build_runs(exp)
-        _check(exp)
         runs, _, cfg = sweep_cache[key]
         problem = cp.make_problem("wheel", delta=exp.delta, num_arms=exp.num_arms)
         params = problem.params
     else:
         runs, problem, cfg = build_runs(exp)
-    est = check_fits(exp, run_dir)
     if est["seconds"] > 60 and progress:
         log(f"estimated run time ~{io.fmt_time(est['seconds'])} at most "
             f"({io.fmt_bytes(est['memory_bytes'])} of memory)")
-    _check_run_dir(exp, run_dir)
-    from sern_jax.infra import validate
-
-    validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind
     # created and locked in one step; a directory this run created is removed again, under
     # the lock, when it fails before saving any seeds
     with io.run_lock(run_dir, remove_unused=_tab.no_chunks_saved):

@@ -108,6 +108,14 @@ def _check_cli_values(exp: RegretExperiment) -> None:
     2^31 − 1 with ``--float64`` (int32 round counters)."""
     if not exp.policies:
         raise ValueError("--policies is empty; give a comma list such as 'softmax,greedy'")
+    from sern_jax.core import estimators, schedules as schedules_lib
+
+    if exp.estimator not in estimators.ESTIMATOR_NAMES:
+        raise ValueError(f"--estimator: unknown estimator {exp.estimator!r}; choose from "
+                         f"{', '.join(estimators.ESTIMATOR_NAMES)} (or neural)")
+    if exp.schedule not in schedules_lib.SCHEDULE_NAMES:
+        raise ValueError(f"--schedule: unknown schedule {exp.schedule!r}; choose from "
+                         f"{', '.join(schedules_lib.SCHEDULE_NAMES)}")
     if len(set(exp.policies)) != len(exp.policies):
         raise ValueError(f"--policies lists a policy twice: {','.join(exp.policies)}")
     check_integer("--arms", exp.num_arms, 2, 2**20)
@@ -320,6 +328,9 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
     from sern_jax.engine import simulate as sim
 
     run_dir = Path(out_dir)
+    from sern_jax.infra import validate
+
+    validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind; before any jax
     ctx = jax.enable_x64() if exp.float64 else _nullcontext()
     with ctx:
         triples = _configs(exp)  # validation before any compile
@@ -345,9 +356,6 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
         if est["seconds"] > 60 and progress:
             log(f"estimated run time ~{io.fmt_time(est['seconds'])} "
                 f"({io.fmt_bytes(est['memory_bytes'])} of results)")
-        from sern_jax.infra import validate
-
-        validate.out_dir(run_dir, "--out")  # tried for real, nothing left behind
         # created and locked in one step; a directory this run created is removed again,
         # under the lock, when it fails before saving any seeds (one writer per run directory)
         with io.run_lock(run_dir, remove_unused=no_chunks_saved):

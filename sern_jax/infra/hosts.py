@@ -6,6 +6,9 @@ size thread pools.
 * ``SERN_CONTEXT_THREADS``: the threads that settle one batch's resting poses (the grasp
   contexts), where the user wants fewer than the cores (``1``: one after another).
 * ``SERN_PIN_CORES``: ``1`` where a Ray task pins itself to its share of cores.
+* ``SERN_GPU_NONDETERMINISTIC``: ``1`` to leave XLA's GPU autotuning and non-deterministic
+  kernels on (:func:`use_deterministic_xla`; by default the ``sern`` commands turn them off,
+  so that a rerun of the same command on a GPU gives the same bits).
 
 Values that are not positive integers are ignored (the default applies).
 """
@@ -15,6 +18,7 @@ from __future__ import annotations
 import os
 
 __all__ = [
+    "DETERMINISTIC_XLA_FLAGS",
     "MANY_CORES",
     "context_threads",
     "cpu_threads",
@@ -22,6 +26,7 @@ __all__ = [
     "many_cores",
     "pin_cores_requested",
     "usable_cores",
+    "use_deterministic_xla",
 ]
 
 MANY_CORES = 8  # a host with at least this many usable cores counts as many-core
@@ -68,3 +73,26 @@ def many_cores() -> bool:
 def pin_cores_requested() -> bool:
     """Whether this process was asked to pin itself to its share of cores (a Ray task)."""
     return os.environ.get("SERN_PIN_CORES") == "1"
+
+
+# XLA's GPU options for bit-identical reruns: deterministic kernels (no atomics in reductions and
+# scatters), and no autotuning (which times candidate kernels and may pick another one on a
+# busy GPU). Both are ignored by the CPU backend, whose results are deterministic already.
+DETERMINISTIC_XLA_FLAGS = ("--xla_gpu_deterministic_ops=true", "--xla_gpu_autotune_level=0")
+
+
+def use_deterministic_xla() -> bool:
+    """Adds :data:`DETERMINISTIC_XLA_FLAGS` to ``XLA_FLAGS`` (options the user set there win)
+    unless ``SERN_GPU_NONDETERMINISTIC=1``; returns whether they are in effect.
+
+    XLA reads ``XLA_FLAGS`` when a backend starts, so this must run before the first JAX
+    computation of the process (the ``sern`` entry point calls it first thing).
+    """
+    if os.environ.get("SERN_GPU_NONDETERMINISTIC") == "1":
+        return False
+    flags = os.environ.get("XLA_FLAGS", "").split()
+    names = {f.split("=", 1)[0] for f in flags}
+    extra = [f for f in DETERMINISTIC_XLA_FLAGS if f.split("=", 1)[0] not in names]
+    if extra:
+        os.environ["XLA_FLAGS"] = " ".join(flags + extra)
+    return all(f in os.environ["XLA_FLAGS"].split() for f in DETERMINISTIC_XLA_FLAGS)

@@ -16,7 +16,8 @@ One *round* (the paper's Section VI) for every (object, seed, learner):
    for Algorithm 1's learners).
 
 Every function here is a function of (learner states, a round's contexts, the run's [O, S]
-keys, the round index) to arrays: none starts a thread, reads or writes a file, or keeps
+keys, the round index) to arrays: none starts a thread (a simulator passed in may run its
+trials on workers of its own; ``map_fn`` is the caller's), reads or writes a file, or keeps
 anything between calls but its compiled programs (cached per learner function), so a round
 can be called from a test on its own. Each learner's ``act`` and ``update`` is one jitted
 call vmapped over the O x S copies; contexts, crops and trials are shared by the learners,
@@ -233,7 +234,7 @@ def run_trials(simulators: Sequence, grasps, poses, noise_keys, n_per_key,
                map_fn: MapFn = map) -> tuple[np.ndarray, TrialCounts]:
     """Runs every object's trials.
 
-    grasps [O, S, Q, N, 4], poses [O, S, N, 7], noise_keys[o][s]: trial j of (o, s) uses
+    grasps [O, S, Q, N, 4], poses [O, S, N, 7], ``noise_keys[o][s]``: trial j of (o, s) uses
     ``sample_noise(noise_keys[o][s], N)[j]`` for every learner (common random numbers).
     Returns (success [O, S, Q, N] bool, the trials requested and simulated).
 

@@ -1,0 +1,1 @@
+from sern_jax.core import fake_b  # noqa: F401

@@ -1,0 +1,1 @@
+from sern_jax.engine import drive  # noqa: F401

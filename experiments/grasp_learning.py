@@ -460,8 +460,8 @@ def main(argv=None) -> int:
         # collect's results directory must be one this process can write
         read = Path(a.dirs[0])
         if not read.is_dir():
-            p.error(f"{read}: no such directory (the {'runs' if argv[0] == 'collect' else 'results'} "
-                    f"directory to {argv[0]})")
+            what = "runs" if argv[0] == "collect" else "results"
+            p.error(f"{read}: no such directory (the {what} directory to {argv[0]})")
         if argv[0] == "collect":
             if not any(read.glob("*/run_meta.json")):
                 p.error(f"{read} holds no run of `python -m experiments.grasp_learning` (no "

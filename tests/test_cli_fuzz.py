@@ -506,7 +506,7 @@ def _run_refused(argv, flag):
 
 
 @pytest.mark.parametrize("key, flag", _CASES, ids=[f"{' '.join(k)} {f}" for k, f in _CASES])
-@settings(max_examples=3, deadline=None, derandomize=True, database=None,
+@settings(max_examples=2, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
 def test_every_flag_refuses_bad_values(key, flag, data, compile_guard):
@@ -527,7 +527,7 @@ _POSITIONAL = [(["grasp", "show"], ["--no-render", "--trials", "1", "--out", "sh
 
 
 @pytest.mark.parametrize("head, tail", _POSITIONAL, ids=[" ".join(h) for h, _ in _POSITIONAL])
-@settings(max_examples=3, deadline=None, derandomize=True, database=None,
+@settings(max_examples=2, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(name=_NAME_JUNK)
 def test_every_positional_refuses_unknown_names(head, tail, name, compile_guard):

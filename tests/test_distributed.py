@@ -174,7 +174,7 @@ def test_worker_env_sets_threads_cache_and_platform(tmp_path, monkeypatch):
         distributed.worker_env(distributed.RayConfig(cache_dir=str(run_dir / ".jax_cache")),
                                run_dir)
     assert env["JAX_PLATFORMS"] == "cpu"
-    env = distributed.worker_env(distributed.RayConfig(gpus_per_task=0.5), tmp_path)
+    env = distributed.worker_env(distributed.RayConfig(gpus_per_task=0.5), run_dir)
     assert "JAX_PLATFORMS" not in env and env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"
     assert "--xla_cpu_multi_thread_eigen=false" in env["XLA_FLAGS"]
 

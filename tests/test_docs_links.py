@@ -1,4 +1,4 @@
-"""The README's links lead somewhere, and the citation and license files match the package."""
+"""The README's links resolve, and the citation and license files match the package."""
 
 from __future__ import annotations
 

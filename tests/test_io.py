@@ -114,7 +114,7 @@ def test_damaged_unit_is_set_aside_for_recompute(tmp_path, how):
 
 _HOLDER = """
 import sys, time
-from sern_jax import io
+from sern_jax.infra import io
 with io.run_lock(sys.argv[1], command="holder test"):
     print("locked", flush=True)
     time.sleep(60)
@@ -123,7 +123,7 @@ with io.run_lock(sys.argv[1], command="holder test"):
 
 _SECOND = """
 import sys
-from sern_jax import io
+from sern_jax.infra import io
 try:
     io.run_lock(sys.argv[1]).__enter__()
 except io.RunLockedError as e:

@@ -208,7 +208,7 @@ def test_regret_run_directory_is_locked(run_dir, capsys):
     import sys
 
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom sern_jax import io\n"
+        [sys.executable, "-c", "import sys, time\nfrom sern_jax.infra import io\n"
          "with io.run_lock(sys.argv[1], command='sern regret (another)'):\n"
          "    print('locked', flush=True)\n    time.sleep(120)\n", str(run_dir)],
         stdout=subprocess.PIPE, text=True)

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sern_jax.bench import bandit as benchmarks
-from sern_jax.engine import drive as executor, fast_softmax
+from sern_jax.engine import drive as executor, fast_softmax, summary
 from sern_jax.infra import io
 from sern_jax.engine import simulate as sim
 
@@ -45,14 +45,14 @@ def compensated_sum_every(x, every):
             rest.append((s[-1], c[-1]))
             s, c = s[:-1], c[:-1]
         h = s.shape[0] // 2
-        s, e = executor._two_sum(s[:h], s[h:])
+        s, e = summary._two_sum(s[:h], s[h:])
         c = c[:h] + c[h:] + e
         level += 1
         if level % every == 0:
             s, c = jax.lax.optimization_barrier((s, c))
     total, comp = s[0], c[0]
     for s_r, c_r in rest:
-        total, e = executor._two_sum(total, s_r)
+        total, e = summary._two_sum(total, s_r)
         comp = comp + c_r + e
     return total + comp
 
@@ -86,7 +86,7 @@ def main():
 
     def hist(x):
         x3 = x.reshape(seeds, x.shape[1], -1)
-        idx = executor._bin_index(x3, e, jnp.float32)
+        idx = summary._bin_index(x3, e, jnp.float32)
         bins = e.shape[1] - 1
         cols = jnp.arange(x3.shape[1] * x3.shape[2], dtype=jnp.int32).reshape(x3.shape[1:])
         flat = cols[None] * bins + idx
@@ -116,7 +116,7 @@ def main():
     res["seed_keys_jit"] = timeit(lambda: sk(s.root, jnp.uint32(0)))
     dev = plan.fn(keys, params, n)
     jax.block_until_ready(dev)
-    res["host_stats"] = timeit(lambda: executor._host_stats(dev, seeds, edges))
+    res["host_stats"] = timeit(lambda: summary.host_stats(dev, seeds, edges))
     res["run_seeds_summary"] = timeit(
         lambda: executor.run_seeds(config, params, 0, seeds, summary=True), repeats=3)
     # the fused summary with barriers every 4 levels (executor.compensated_sum swapped)

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sern_jax.bench import bandit as benchmarks
-from sern_jax.engine import drive as executor, fast_softmax
+from sern_jax.engine import drive as executor, fast_softmax, summary
 from sern_jax.infra import io
 from sern_jax.engine import simulate as sim
 
@@ -57,7 +57,7 @@ def old_summarize_outputs(out, num_valid, edges):
             e = jnp.asarray(edges[field], dtype)
             bins = e.shape[1] - 1
             x3 = x.reshape(size, x.shape[1], -1)
-            idx = executor._bin_index(x3, e, dtype)
+            idx = summary._bin_index(x3, e, dtype)
             cols = jnp.arange(x3.shape[1] * x3.shape[2], dtype=jnp.int32).reshape(x3.shape[1:])
             flat = cols[None] * bins + idx
             weight = jnp.broadcast_to(valid[:, None, None], x3.shape).astype(jnp.int32)

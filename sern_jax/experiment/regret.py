@@ -132,11 +132,15 @@ def _check_cli_values(exp: RegretExperiment) -> None:
             raise ValueError(f"{flag} must be a finite number, got {value!r}")
     if exp.alpha0 <= 0:
         raise ValueError(f"--alpha must be > 0, got {exp.alpha0!r}")
-    if not exp.float64:  # the run's float32 must hold them (1e300 would become inf)
+    if not exp.float64:  # the run's float32 must hold them (1e300 would become inf; values
+        # below its smallest normal are the α(T) check's, below)
         from sern_jax.infra import validate
 
-        for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p)):
-            validate.finite_float(value, flag, float32_normal=True)
+        for flag, value in (("--alpha", exp.alpha0), ("--p", exp.p), ("--gap", exp.gap)):
+            if abs(value) > validate.FLOAT32_MAX:
+                raise ValueError(f"{flag} {value:g} is beyond float32's largest number "
+                                 f"({validate.FLOAT32_MAX:.4g}): it would be computed as "
+                                 "infinity; use --float64 or a smaller value")
     _check_means(exp)
     if not 0.0 <= exp.epsilon <= 1.0:
         raise ValueError(f"--epsilon must lie in [0, 1], got {exp.epsilon!r}")

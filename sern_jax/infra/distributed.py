@@ -35,8 +35,10 @@ turns a missing installation into one line naming ``--ray`` and the ``[ray]`` ex
 ``--ray ADDRESS`` is tried before anything is written: :func:`from_args` opens a TCP
 connection to the address with a bound of :data:`CONNECT_TIMEOUT_S` seconds and refuses an
 address nobody answers at in one line naming ``--ray``. The local Ray that ``--ray`` starts
-binds to loopback (``127.0.0.1``), and Ray's own log lines stay out of the terminal (errors
-only).
+takes loopback (``127.0.0.1``) as its node address, so its nodes and workers talk over
+loopback only; Ray 2.60's gRPC servers still listen on every interface (Ray has no setting
+that binds them), which token authentication guards. Ray's own log lines stay out of the
+terminal (errors only).
 
 Security: Ray 2.60 turns token authentication on by default. Keep it on, and never expose a
 head node's ports: anyone who reaches an open Ray head can run code on every node
@@ -71,7 +73,7 @@ __all__ = [
 LOCAL = "local"  # --ray without an address: start a Ray on this machine
 EXTRA = "pip install -e '.[ray]'"
 CONNECT_TIMEOUT_S = 10.0  # --ray ADDRESS: seconds the address has to answer
-LOOPBACK = "127.0.0.1"  # the local Ray's address: reachable from this machine only
+LOOPBACK = "127.0.0.1"  # the local Ray's node address
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,8 +156,9 @@ def add_arguments(parser, *, gpus_default: float = 0.0) -> None:
         "--ray", nargs="?", const=LOCAL, default=None, metavar="ADDRESS",
         type=validate.ray_address,
         help="run the units of work as Ray tasks (needs the [ray] extra: "
-             f"{EXTRA}); no ADDRESS starts a local Ray (bound to loopback), 'auto' joins the "
-             "cluster started on this machine with `ray start`, host:port another one; an "
+             f"{EXTRA}); no ADDRESS starts a local Ray (node address 127.0.0.1), 'auto' "
+             "joins the cluster started on this machine with `ray start`, host:port another "
+             "one; an "
              f"address that does not answer within {CONNECT_TIMEOUT_S:g} s is refused before "
              "anything is written; same run directory and results as without --ray")
     parser.add_argument("--ray-workers", type=validate.int_in(1, 1_000_000), default=None,
@@ -349,8 +352,9 @@ def _pin_cores(threads: int) -> list[int] | None:
     ``threads`` cores no other pinned worker of this user on this node holds, claimed by an
     exclusive ``flock`` on ``<tmp>/sern-ray-cores-<uid>/core-<i>`` (:func:`private_dir`:
     this user's, mode 0700, never a planted symlink; the files are opened with
-    ``O_NOFOLLOW``) for the life of the process (the kernel releases it when it dies). Called before the unit's first JAX call, so XLA's CPU
-    thread pool is sized to the claimed cores. None (unpinned) when too few cores are free."""
+    ``O_NOFOLLOW``) for the life of the process (the kernel releases it when it dies).
+    Called before the unit's first JAX call, so XLA's CPU thread pool is sized to the
+    claimed cores. None (unpinned) when too few cores are free."""
     if "cores" in _PIN:
         return _PIN["cores"]
     import fcntl

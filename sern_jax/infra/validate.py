@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "FLOAT32_MAX",
     "FLOAT32_TINY",
     "OneLineParser",
     "comma_list",
@@ -110,8 +111,8 @@ def int_in(low: int, high: int | None = None):
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < low or (high is not None and value > high):
-            span = f">= {low}" if high is None else f"in [{low}, {high}]"
-            raise argparse.ArgumentTypeError(f"must be an integer {span}, got {value}")
+            span = f"be >= {low}" if high is None else f"be an integer in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"must {span}, got {value}")
         return value
 
     parse.__name__ = f"integer >= {low}" if high is None else f"integer in [{low}, {high}]"

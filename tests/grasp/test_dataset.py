@@ -187,7 +187,7 @@ def hold_lock_in_another_process(run_dir, command):
     import sys
 
     proc = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom sern_jax import io\n"
+        [sys.executable, "-c", "import sys, time\nfrom sern_jax.infra import io\n"
          "with io.run_lock(sys.argv[1], command=sys.argv[2]):\n"
          "    print('locked', flush=True)\n    time.sleep(120)\n", str(run_dir), command],
         stdout=subprocess.PIPE, text=True)

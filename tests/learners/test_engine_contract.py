@@ -45,28 +45,33 @@ def _check(out: nr.NeuralRunOutput, num_arms: int) -> None:
     np.testing.assert_allclose(out.compensator[:, -1].sum(axis=1), HORIZON, rtol=1e-5)
 
 
-def test_the_contract_covers_every_registered_learner():
+def test_the_contract_covers_every_registered_learner_and_problem():
     assert {name for name, _ in VARIANTS} == set(registry.names())
+    assert {problem for _, _, problem in ROTATION} == set(PROBLEMS)
 
 
-@pytest.mark.parametrize("name, hyper", VARIANTS,
-                         ids=[n + "".join(f"-{v}" for v in h.values()) for n, h in VARIANTS])
-def test_every_learner_runs_through_the_neural_engine_on_the_wheel(name, hyper):
-    problem = PROBLEMS["wheel"]()
+# each variant on one problem, the problems in turn (the full cross product is slow, below)
+ROTATION = [(name, hyper, list(PROBLEMS)[i % len(PROBLEMS)])
+            for i, (name, hyper) in enumerate(VARIANTS)]
+
+
+@pytest.mark.parametrize("name, hyper, problem_name", ROTATION,
+                         ids=[f"{n}{''.join(f'-{v}' for v in h.values())}-{p}"
+                              for n, h, p in ROTATION])
+def test_every_learner_runs_through_the_neural_engine(name, hyper, problem_name):
+    problem = PROBLEMS[problem_name]()
     _check(_run(name, hyper, problem), problem.num_arms)
 
 
-@pytest.mark.parametrize("problem_name", ["finite", "linear"])
+@pytest.mark.slow
+@pytest.mark.parametrize("problem_name", list(PROBLEMS))
 @pytest.mark.parametrize("name", registry.names())
 def test_every_learner_runs_on_every_neural_problem(name, problem_name):
     problem = PROBLEMS[problem_name]()
     _check(_run(name, {}, problem), problem.num_arms)
 
 
-@pytest.mark.parametrize("name", registry.names())
-def test_every_learner_runs_in_the_neural_benchmarks_per_seed_loop(name):
-    # ``sern bench neural --learner NAME``: its batched path is the engine's (above), its
-    # reference a Python loop over jitted act / update on one seed
+def _bench_loop(name: str) -> None:
     cfg = nb.NeuralBenchConfig(learner=name, num_seeds=2, horizon=HORIZON,
                                update_every=EVERY, hidden=(3,), fit_steps=1, batch_size=2,
                                loop_seeds=1, loop_rounds=EVERY)
@@ -74,3 +79,15 @@ def test_every_learner_runs_in_the_neural_benchmarks_per_seed_loop(name):
     actions, regret = nb.python_loop(problem, model, learner, EVERY, jax.random.key(0), EVERY)
     assert actions.shape == (EVERY,) and np.all((actions >= 0) & (actions < problem.num_arms))
     assert np.isfinite(regret)
+
+
+def test_the_neural_benchmarks_per_seed_loop_runs_ensemble_ts():
+    # ``sern bench neural --learner ensemble_ts`` (its batched path is the engine's, above;
+    # its reference a Python loop over jitted act / update on one seed)
+    _bench_loop("ensemble_ts")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", registry.names())
+def test_every_learner_runs_in_the_neural_benchmarks_per_seed_loop(name):
+    _bench_loop(name)

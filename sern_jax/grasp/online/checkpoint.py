@@ -120,7 +120,7 @@ def _finite_list(values) -> list:
     return [float(v) if np.isfinite(v) else None for v in values]
 
 
-# ---------------------------------------------------------------------------- checkpoint
+# ----------------------------------------------------------------------------- checkpoint
 
 
 def load(path: str | Path, fingerprint: str, run_dir: str | Path
@@ -145,6 +145,8 @@ def save(path, fingerprint, results, rewards, next_round) -> None:
     arrays = {f: np.asarray(getattr(results, f)) for f in results._fields}
     io.save_npz(path, fingerprint=np.asarray(fingerprint), next_round=np.asarray(next_round),
                 explore_reward=np.asarray(rewards, np.int8), **arrays)
+
+
 def through(results: RoundResults, rewards: np.ndarray, next_round: int):
     """Copies of ``results`` and ``rewards`` holding rounds ``< next_round`` only, later
     rounds at their initial fill (NaN, action -1, reward 0): what the checkpoint of a run
@@ -161,7 +163,7 @@ def through(results: RoundResults, rewards: np.ndarray, next_round: int):
             cut(rewards, 0))
 
 
-# ------------------------------------------------------------------------ learner states
+# ----------------------------------------------------------------------------- learner states
 
 
 def state_arrays(state: lbase.LearnerState, prefix: str, horizon: int) -> dict:

@@ -463,7 +463,7 @@ class _Loop:
             # π itself is needed only by the regret accounting (its pseudo-regret)
             acted = step.act(copies, self.states, ctx, r, bool(config.regret_trials))
         step.check_actions(acted.action, np.asarray(ctx.candidates.valid, bool),
-                           config.policies, copies.object_names, r)
+                           copies.learner_names, copies.object_names, r)
         with meters.phase("trials"):
             success, counts = step.explore_trials(copies, ctx, acted.action, r,
                                                   self.trial_map)

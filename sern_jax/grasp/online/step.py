@@ -106,6 +106,8 @@ class TrialCounts(NamedTuple):
 
 
 class Acted(NamedTuple):
+    """One exploration phase's choices of every learner copy."""
+
     action: np.ndarray  # [O, S, Q, E] int32 chosen candidate slots (NO_ARM: none valid)
     probs: np.ndarray | None  # [O, S, Q, E, K] the policies' distributions (None: not asked)
 

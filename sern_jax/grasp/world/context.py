@@ -330,7 +330,7 @@ _CAMERA_MODELS_LOCK = threading.Lock()
 def _camera_model(model: mujoco.MjModel):
     """``depth.camera_model(model)``, kept per model contents (the MJB bytes' digest, so an
     edited model is another entry): ``mjx.put_model`` costs ~15 ms of Python per call, and
-    the online runner renders every (object, seed) batch of every round in one scene."""
+    the online driver renders every (object, seed) batch of every round in one scene."""
     import hashlib
 
     buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)

@@ -59,6 +59,7 @@ __all__ = [
     "SceneConfig",
     "SceneIds",
     "scene_xml",
+    "scene_config",
     "scene_ids",
     "resting_pose",
     "resting_pose_from_uniforms",
@@ -159,9 +160,20 @@ def _fmt(v) -> str:
     return " ".join(f"{float(x):.9g}" for x in v)
 
 
-def scene_xml(spec: objects_lib.ObjectSpec, config: SceneConfig = SceneConfig()) -> str:
-    """The scene's MJCF (object at the origin, identity orientation, not yet dropped)."""
+def scene_xml(spec: objects_lib.ObjectSpec, config: SceneConfig = SceneConfig(),
+              inertial: tuple | None = None) -> str:
+    """The scene's MJCF (object at the origin, identity orientation, not yet dropped).
+
+    ``inertial``: optional (pos [3], quat [4], mass, diaginertia [3]) of the object body,
+    written at full precision in place of the inertia MuJoCo derives from the geoms (a
+    uniform scene keeps the exact object's inertia this way)."""
     c = config
+    body_inertial = ""
+    if inertial is not None:
+        pos, quat, mass, diag = inertial
+        full = lambda v: " ".join(repr(float(x)) for x in np.ravel(v))  # noqa: E731
+        body_inertial = (f'<inertial pos="{full(pos)}" quat="{full(quat)}" '
+                         f'mass="{float(mass)!r}" diaginertia="{full(diag)}"/>')
     assets, geoms = [], []
     total_volume = spec.volume
     for i, g in enumerate(spec.geoms):
@@ -220,7 +232,7 @@ def scene_xml(spec: objects_lib.ObjectSpec, config: SceneConfig = SceneConfig())
           friction="0.5 0.005 0.0001"/>
     <body name="object" pos="0 0 0.2">
       <freejoint name="object_free"/>
-      {"".join(geoms)}
+      {body_inertial}{"".join(geoms)}
     </body>
     <body name="palm" gravcomp="1">
       <joint name="palm_x" axis="1 0 0" {palm_slide}/>
@@ -257,6 +269,36 @@ def scene_xml(spec: objects_lib.ObjectSpec, config: SceneConfig = SceneConfig())
   </actuator>
 </mujoco>
 """
+
+
+def scene_config(model: mujoco.MjModel) -> SceneConfig:
+    """The ``SceneConfig`` a scene was built with, read back from the compiled model (the
+    settling settings ``xy_jitter`` and ``settle_steps`` leave no trace in it and come back
+    as their defaults; ``friction`` is the object's current sliding friction)."""
+    ids = scene_ids(model)
+
+    def dof(joint_name):
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint_name)
+        return float(model.dof_damping[model.jnt_dofadr[j]])
+
+    finger = ids.finger_actuators[0]
+    jnt = model.actuator_trnid[finger, 0]
+    return SceneConfig(
+        timestep=float(model.opt.timestep),
+        iterations=int(model.opt.iterations),
+        ls_iterations=int(model.opt.ls_iterations),
+        impratio=float(model.opt.impratio),
+        opening=2 * float(model.jnt_range[jnt, 1]),
+        finger_force=float(model.actuator_forcerange[finger, 1]),
+        finger_kp=float(model.actuator_gainprm[finger, 0]),
+        finger_damping=dof("finger_a"),
+        palm_kp=float(model.actuator_gainprm[ids.palm_actuators[0], 0]),
+        palm_damping=dof("palm_x"),
+        yaw_kp=float(model.actuator_gainprm[ids.palm_actuators[3], 0]),
+        yaw_damping=dof("palm_yaw"),
+        friction=float(model.geom_friction[ids.object_geoms[0], 0]),
+        pad_friction=float(model.geom_friction[ids.pad_geoms[0], 0]),
+    )
 
 
 def scene_ids(model: mujoco.MjModel) -> SceneIds:

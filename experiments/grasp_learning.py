@@ -484,12 +484,12 @@ def main(argv=None) -> int:
 
     parser = validate.script_parser(__spec__, description=__doc__.splitlines()[0])
     parser.add_argument("setting", choices=SETTINGS + ("ablations",))
-    parser.add_argument("--labels", default="",
+    parser.add_argument("--labels", default=None,
                         help="comma-separated run labels (or setting/label) to run of the "
                              "setting's list (default: all)")
     parser.add_argument("--objects", type=validate.int_at_least(1), default=None,
                         help="first N objects of the hard set (default 6; regret 3)")
-    parser.add_argument("--only", default="", help="comma-separated hard-set objects")
+    parser.add_argument("--only", default=None, help="comma-separated hard-set objects")
     parser.add_argument("--seeds", type=validate.int_at_least(1), default=5)
     parser.add_argument("--rounds", type=validate.int_at_least(1), default=5)
     parser.add_argument("--out", default=None)
@@ -515,8 +515,8 @@ def main(argv=None) -> int:
         validate.out_dir(out, "--out")
         validate.out_dir(results, "--results")
         wanted_labels = (set(validate.comma_list(args.labels, "--labels"))
-                         if args.labels else set())
-        only = validate.comma_list(args.only, "--only") if args.only else []
+                         if args.labels is not None else set())
+        only = validate.comma_list(args.only, "--only") if args.only is not None else []
     except ValueError as exc:
         parser.error(str(exc))
 

@@ -211,7 +211,7 @@ def main(argv=None) -> int:
     parser.add_argument("--contexts", type=count, default=8)
     parser.add_argument("--trials", type=count, default=16,
                         help="trials of every valid candidate (the pipeline's table)")
-    parser.add_argument("--top", type=int, default=8,
+    parser.add_argument("--top", type=validate.int_in(2, 10_000), default=8,
                         help="candidates (best on --trials) that get --deep-trials")
     parser.add_argument("--deep-trials", type=count, default=256)
     parser.add_argument("--seeds", type=count, default=4)
@@ -219,8 +219,10 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="runs/theory_grasping")
     args = parser.parse_args(argv)
     bad = parser.error
-    try:  # the output directory before any work (nothing is left behind by the check)
+    try:  # the output directory and the object list before any work (nothing is left behind)
         validate.out_dir(args.out, "--out")
+        if args.objects is not None:
+            validate.comma_list(args.objects, "--objects")
     except ValueError as exc:
         bad(str(exc))
     if args.top < 2:

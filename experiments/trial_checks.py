@@ -122,11 +122,11 @@ def main(argv=None) -> int:
     except ValueError as exc:
         ap.error(str(exc))
     try:
-        forces = [float(f) for f in args.forces.split(",") if f]
-    except ValueError:
-        ap.error(f"--forces must be comma-separated numbers, got {args.forces!r}")
-    if any(not (f > 0) for f in forces):
-        ap.error("--forces must be > 0")
+        forces = validate.comma_list_of(args.forces, "--forces", float, "numbers")
+    except ValueError as exc:
+        ap.error(str(exc))
+    if any(not (0 < f < 1e6) for f in forces):
+        ap.error("--forces must lie in (0, 1e6) newtons")
     from sern_jax.grasp.world import objects as objects_lib
 
     if not names:

@@ -90,7 +90,7 @@ def test_bad_flag_value(base, extra, flag, tmp_path, monkeypatch, capsys):
     (tmp_path / "a_file").write_text("keep")
     before = sorted(p.name for p in tmp_path.rglob("*"))
     t0 = time.perf_counter()
-    assert cli.main(base + extra) == 2
+    assert _main(base + extra) == 2
     elapsed = time.perf_counter() - t0
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.strip()]
@@ -470,19 +470,15 @@ _ACTIONS = {(key, flag): action for key in BASES
             for flag in action.option_strings[:1]}
 
 
-@pytest.fixture(scope="module")
-def compile_guard():
-    """Any JAX compile raises :class:`_Compiled` while the property test runs."""
+@pytest.fixture
+def compile_guard(monkeypatch):
+    """Any JAX compile raises :class:`_Compiled` while a property test runs."""
     from jax._src import compiler
-
-    real = compiler.compile_or_get_cached
 
     def refuse(*args, **kwargs):
         raise _Compiled("a bad flag value reached a JAX compile")
 
-    compiler.compile_or_get_cached = refuse
-    yield
-    compiler.compile_or_get_cached = real
+    monkeypatch.setattr(compiler, "compile_or_get_cached", refuse)
 
 
 def _run_refused(argv, flag):
@@ -534,3 +530,60 @@ def test_every_positional_refuses_unknown_names(head, tail, name, compile_guard)
     status, lines, wrote, compiled = _run_refused(head + [name] + tail, name)
     assert not compiled and status == 2 and len(lines) == 1, (head, name, status, lines)
     assert name in lines[0] and not wrote, (head, name, lines)
+
+
+# The experiment scripts, run as `sern experiment NAME ...`: each flag of their parsers (read
+# by stopping the script's main at its parse), on a small valid command line.
+SCRIPT_BASES = {
+    "hard_objects": ["--poses", "1", "--trials", "1", "--out", "o.json"],
+    "trial_checks": ["--poses", "1", "--candidates", "1", "--out", "o.json"],
+    "core_set_forgetting": ["--out", "o"],
+    "theory_on_grasping": ["--out", "o"],
+    "make_theta0": ["--out", "o"],
+    "grasp_learning": ["paper", "--results", "res", "--out", "o"],
+}
+
+
+class _Parsed(BaseException):
+    """Raised in place of parsing: the script's parser is built and read."""
+
+
+def _script_flags(name: str, base: list[str]):
+    import importlib
+
+    from sern_jax.infra import validate
+
+    seen = {}
+    real = validate.OneLineParser.parse_args
+
+    def capture(self, args=None, namespace=None):
+        seen["parser"] = self
+        raise _Parsed
+
+    validate.OneLineParser.parse_args = capture
+    try:
+        importlib.import_module(f"experiments.{name}").main(list(base))
+    except _Parsed:
+        pass
+    finally:
+        validate.OneLineParser.parse_args = real
+    return [a for a in _value_flags(seen["parser"]) if a.choices is None]
+
+
+_SCRIPT_CASES = [(name, action.option_strings[0], action)
+                 for name, base in SCRIPT_BASES.items() for action in _script_flags(name, base)]
+
+
+@pytest.mark.parametrize("name, flag, action", _SCRIPT_CASES,
+                         ids=[f"{n} {f}" for n, f, _ in _SCRIPT_CASES])
+@settings(max_examples=2, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_every_script_flag_refuses_bad_values(name, flag, action, data, compile_guard):
+    value = data.draw(_strategy(action), label=flag)
+    argv = ["experiment", name] + SCRIPT_BASES[name] + [f"{flag}={value}"]
+    status, lines, wrote, compiled = _run_refused(argv, flag)
+    assert not compiled, f"{argv}: compiled before refusing"
+    assert status == 2 and len(lines) == 1, (argv, status, lines)
+    assert flag in lines[0] and "Traceback" not in lines[0], (argv, lines)
+    assert not wrote, f"{argv}: wrote into the working directory"

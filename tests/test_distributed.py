@@ -57,6 +57,15 @@ def test_ray_missing_is_one_line_naming_the_flag_and_extra(tmp_path, monkeypatch
     assert not out.exists()
 
 
+def _status(argv) -> int:
+    """``main``'s exit status, whether it returns it or argparse exits with it (a flag's
+    typed parser refuses a bad value while parsing)."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
 @pytest.mark.parametrize("flags, named", [
     (["--ray-workers", "2"], "--ray-workers"),  # a companion without --ray
     (["--ray-gpus", "1"], "--ray-gpus"),
@@ -69,7 +78,7 @@ def test_ray_missing_is_one_line_naming_the_flag_and_extra(tmp_path, monkeypatch
 ])
 def test_bad_ray_flags_are_one_line(tmp_path, capsys, flags, named):
     out = tmp_path / "r"
-    assert main(TINY + flags + ["--out", str(out)]) == 2
+    assert _status(TINY + flags + ["--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and named in err, err
     assert not out.exists()
@@ -241,7 +250,10 @@ def _chunk_fields(run_dir: Path) -> dict[str, dict]:
             for p in sorted((run_dir / "chunks").glob("*.npz"))}
 
 
-def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, capsys):
+def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, capsys,
+                                                         monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
     one, par = tmp_path / "one", tmp_path / "ray"
     assert main(TINY + ["--out", str(one)]) == 0
     assert main(TINY + ["--ray", "--out", str(par)]) == 0
@@ -252,7 +264,9 @@ def test_regret_on_ray_equals_single_process_and_resumes(local_ray, tmp_path, ca
     for name, arrays in _chunk_fields(par).items():
         _assert_same_arrays(single[name], arrays)
     assert io.load_json(one / "summary.json") == io.load_json(par / "summary.json")
-    assert any((par / ".jax_cache").iterdir())  # the workers' persistent compile cache
+    # the workers' persistent compile cache: this user's, never inside the run directory
+    assert any((tmp_path / "cache" / "sern_jax" / "jax").iterdir())
+    assert not (par / ".jax_cache").exists()
 
     # an interrupted / damaged run resumes with the same command: one chunk gone, one damaged
     chunks = sorted((par / "chunks").glob("*.npz"))
@@ -309,8 +323,8 @@ def test_dataset_on_ray_equals_single_process_and_resumes(local_ray, tmp_path):
 
 def test_dataset_command_refuses_a_bad_ray_flag_in_one_line(tmp_path, capsys):
     out = tmp_path / "d0"
-    assert main(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
-                 "--ray-cpus", "0", "--out", str(out)]) == 2
+    assert _status(["grasp", "dataset", "--objects", "1", "--poses", "1", "--ray",
+                    "--ray-cpus", "0", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ray-cpus" in err
     assert not out.exists()
@@ -470,6 +484,8 @@ def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch)
     killed mid-unit once (retried); checks they are equal; returns (one, par, single arrays)."""
     from sern_jax.grasp.online import learn_units
 
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
     one, par = tmp_path / "one", tmp_path / "ray"
     assert main(LEARN + ["--out", str(one)]) == 0
     # the box's worker is killed mid-unit (after round 1) once: retried, same results
@@ -484,7 +500,9 @@ def _learn_single_and_on_ray_with_a_killed_worker(tmp_path, capsys, monkeypatch)
             io.load_json(par / "table.json")["table"])
     assert sorted(p.name for p in (par / "units").iterdir()) == [
         "object_box", "object_triangular_prism"]
-    assert any((par / ".jax_cache").iterdir())
+    # the workers' compile cache: this user's, never inside the run directory
+    assert any((tmp_path / "cache" / "sern_jax" / "jax").iterdir())
+    assert not (par / ".jax_cache").exists()
     return one, par, single
 
 

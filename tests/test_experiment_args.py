@@ -115,7 +115,8 @@ def test_run_as_module_and_as_sern_experiment(tmp_path, capsys):
         cli.main(["experiment", "trial_checks", "--poses", "0"])
     assert exc.value.code == 2
     err = capsys.readouterr().err.splitlines()
-    assert err == [("sern experiment trial_checks: error: argument --poses: must be >= 1, "
+    assert err == [("sern experiment trial_checks: error: argument --poses: must be an integer "
+                    ">= 1, "
                     "got 0 (see sern experiment trial_checks --help)")], err
     with pytest.raises(SystemExit) as exc:
         cli.main(["experiment", "grasp_learning", "--help"])

@@ -487,11 +487,6 @@ def test_second_learn_on_a_locked_directory_refuses_before_compiling(tmp_path, m
 # ----------------------------------------------------------------------------- scripts
 
 
-def _script(module: str, *argv, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", module, *argv], cwd=cwd, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
-
-
 @pytest.mark.parametrize("module, argv, named", [
     ("experiments.grasp_learning", ["paper", "--labels", "bogus", "--results", "res"],
      "--labels"),
@@ -509,10 +504,19 @@ def _script(module: str, *argv, cwd: Path) -> subprocess.CompletedProcess:
     ("experiments.core_set_forgetting", ["--out", "/proc/x"], "--out"),
     ("experiments.theory_on_grasping", ["--out", "/proc/x"], "--out"),
 ])
-def test_experiment_scripts_validate_before_writing(module, argv, named, tmp_path):
-    out = _script(module, *argv, cwd=tmp_path)
-    assert out.returncode == 2, out.stderr
-    lines = [line for line in out.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and named in lines[0], out.stderr
-    assert "Traceback" not in out.stderr
+def test_experiment_scripts_validate_before_writing(module, argv, named, tmp_path,
+                                                    monkeypatch, capsys):
+    import importlib
+
+    monkeypatch.chdir(tmp_path)
+    main = importlib.import_module(module).main
+    try:
+        status = main(argv)
+    except SystemExit as exc:
+        status = exc.code
+    assert status == 2
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and named in lines[0], err
+    assert "Traceback" not in err
     assert list(tmp_path.iterdir()) == []

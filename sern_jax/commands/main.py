@@ -139,10 +139,7 @@ def main(argv: list[str] | None = None) -> int:
 
     hosts.use_deterministic_xla()  # before any JAX backend starts: reruns on a GPU give the same bits
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0), or argparse's one-line usage error (2)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    args = parser.parse_args(argv)
     if not hasattr(args, "func"):
         return _missing(parser)
     from sern_jax.infra.distributed import UnitFailedError  # imports no ray

@@ -192,7 +192,8 @@ def summary_edges(config: RunConfig, grid: np.ndarray | None = None) -> dict:
     the config's float type (the device compares against exactly these values). ``grid``:
     the config's ``checkpoint_times`` where the caller has them already.
     """
-    grid = (sim.checkpoint_times(config) if grid is None else np.asarray(grid)).astype(np.float64)
+    grid = sim.checkpoint_times(config) if grid is None else np.asarray(grid)
+    grid = grid.astype(np.float64)
     np_dtype = np.float64 if config.dtype == "float64" else np.float32
     out = {}
     for field, bins in SUMMARY_BINS.items():
@@ -315,7 +316,8 @@ def summarize_outputs(out: RunOutput, num_valid: jax.Array, edges: dict) -> dict
 
 
 def host_stats(dev: dict, count: int, edges: dict) -> RunSummary:
-    """The device statistics of one call (:func:`summarize_outputs`) as a host :class:`RunSummary` (float64 / int64)."""
+    """The device statistics of one call (:func:`summarize_outputs`) over ``count`` seeds as
+    a host :class:`RunSummary` (float64 / int64)."""
     fields = {}
     dev = jax.device_get(dev)  # one call: every transfer in flight at once
     for field in SUMMARY_FIELDS:

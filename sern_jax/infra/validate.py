@@ -46,6 +46,7 @@ import numpy as np
 __all__ = [
     "FLOAT32_MAX",
     "FLOAT32_TINY",
+    "INT32_MAX",
     "OneLineParser",
     "comma_list",
     "comma_list_of",
@@ -100,28 +101,37 @@ def script_parser(spec=None, **kwargs) -> OneLineParser:
     return OneLineParser(**kwargs)
 
 
+INT32_MAX = 2**31 - 1  # no count, size or seed of the project goes beyond int32
+
+
 def int_in(low: int, high: int | None = None):
     """An argparse ``type``: an integer in [low, high] (no upper end when None). A bad value
-    is argparse's one-line error naming the flag (``argument --seeds: must be >= 1, got
-    -1``), raised while parsing."""
+    is argparse's one-line error naming the flag (``argument --seeds: must be an integer >= 1,
+    got -1``), raised while parsing."""
 
     def parse(text: str) -> int:
         try:
             value = int(text.strip())
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < low or (high is not None and value > high):
-            span = f"be >= {low}" if high is None else f"be an integer in [{low}, {high}]"
-            raise argparse.ArgumentTypeError(f"must {span}, got {value}")
+        if high is None or high == INT32_MAX:  # a floor, and int32's end as a ceiling
+            if value < low:
+                raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+            if high is not None and value > high:
+                raise argparse.ArgumentTypeError(f"must be <= {high} (int32), got {value}")
+        elif not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f"must be an integer in [{low}, {high}], got {value}")
         return value
 
     parse.__name__ = f"integer >= {low}" if high is None else f"integer in [{low}, {high}]"
     return parse
 
 
-def int_at_least(low: int):
-    """An argparse ``type``: an integer >= ``low`` (:func:`int_in` without an upper end)."""
-    return int_in(low)
+def int_at_least(low: int, high: int | None = INT32_MAX):
+    """An argparse ``type``: an integer >= ``low`` and, by default, at most int32's largest
+    (a count of 10^20 is a typo, never a run; every array index of the project is int32)."""
+    return int_in(low, high)
 
 
 def float_in(low: float | None = None, high: float | None = None, *, low_open: bool = False,

@@ -138,7 +138,7 @@ def head_features(features) -> Array:
     if isinstance(features, ArmFeatures):
         phi, arm = features.phi, jnp.asarray(features.arm, features.phi.dtype)
         block = arm[..., :, None] * phi[..., None, :]  # [..., G, h]
-        return block.reshape(block.shape[:-2] + (-1,))
+        return block.reshape(block.shape[:-2] + (block.shape[-2] * block.shape[-1],))
     return features
 
 

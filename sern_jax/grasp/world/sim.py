@@ -38,8 +38,10 @@ Backends, one interface (:class:`GraspSimulator`):
   model)`` the pure, unbatched trial ``execute(mx, pose, grasp, trial_params) ->
   TrialOutcome`` (a ``lax.scan`` of ``mjx.step``); the GPU path, and the function to vmap
   or jit inside your own program. The ``mjx.Model`` is an argument, so scenes of the same
-  structure share one compiled program; batches are padded to the next power of two, so
-  each power of two compiles once.
+  structure share one compiled program; by default MJX runs the scene's uniform model
+  (``uniform``: every object as the same number of padded convex mesh parts), so one
+  program serves every object, and ``uniform.UniformBatch`` vmaps it over objects too.
+  Batches are padded to the next power of two, so each power of two compiles once.
 
 Every trial can start from its own object pose (``run_trials(..., object_pose=[N, 7])``,
 e.g. the poses of ``context.make_contexts`` on their shared model).
@@ -613,17 +615,28 @@ def _batched_execute(execute):
 
 class _MjxRunner:
     """MJX backend: ``jit(vmap(make_execute(...)))`` over trials, batches padded to 2^k, or
-    run in chunks of exactly ``batch`` trials (the last one padded) when ``batch`` is set:
-    one compiled program per scene, whatever the batch sizes."""
+    run in chunks of exactly ``batch`` trials (the last one padded) when ``batch`` is set.
+    By default on the scene's uniform model (``uniform``): one compiled program for every
+    object, whatever the batch sizes; with ``shape=None`` on the scene itself (one program
+    per object structure)."""
 
-    def __init__(self, model, config, batch=None):
+    def __init__(self, model, config, batch=None, shape="auto"):
         from sern_jax.grasp.world._mjx import mjx
 
         self.model, self.config, self.batch = model, config, batch
         self.ids = scene_lib.scene_ids(model)
-        self.mx = mjx.put_model(model)
-        self.program = _batched_execute(make_execute(config, model))
         self.pose0 = scene_lib.object_pose(model)
+        if shape is None:  # the scene's own structure: one program per object structure
+            self.mx = mjx.put_model(model)
+            self.program = _batched_execute(make_execute(config, model))
+            return
+        from sern_jax.grasp.world import uniform
+
+        if shape == "auto":
+            shape = uniform.shape_for(model)
+        self.uniform = uniform.uniform_scene(model, shape)
+        self.mx = uniform.put_uniform(self.uniform, shape)
+        self.program = _batched_execute(make_execute(config, self.uniform))
 
     def __call__(self, grasps, noise, object_pose):
         n = len(grasps)
@@ -672,6 +685,10 @@ class GraspSimulator:
       chunk: native trials per rollout call (memory: chunk x steps x state doubles).
       mjx_batch: MJX trials per compiled call (None: each call padded to the next power
         of two, one compile per size; an int: chunks of exactly this many, one compile).
+      mjx_shape: the MJX model: ``"auto"`` (default) the scene's uniform model
+        (``uniform.uniform_scene`` with ``uniform.shape_for(model)``), so that one compiled
+        program serves every object; a ``uniform.UniformShape``; or None for the scene
+        itself (its own program; exact primitives and hulls).
     """
 
     def __init__(
@@ -682,6 +699,7 @@ class GraspSimulator:
         num_threads: int | None = None,
         chunk: int = 256,
         mjx_batch: int | None = None,
+        mjx_shape="auto",
     ):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -701,7 +719,7 @@ class GraspSimulator:
         else:
             if mjx_batch is not None and (isinstance(mjx_batch, bool) or mjx_batch < 1):
                 raise ValueError(f"mjx_batch must be an integer >= 1, got {mjx_batch!r}")
-            self._runner = _MjxRunner(model, config, mjx_batch)
+            self._runner = _MjxRunner(model, config, mjx_batch, mjx_shape)
 
     def run_trials(self, grasps, noise: TrialNoise, object_pose=None) -> TrialResult:
         """Runs N trials.

@@ -63,6 +63,8 @@ __all__ = [
     "part_vertices",
     "hull_distance",
     "uniform_spec",
+    "shape_for",
+    "general_mass_pattern",
     "uniform_scene",
     "resample_distances",
     "put_uniform",
@@ -239,6 +241,13 @@ def _uniform_geoms(parts, shape: UniformShape) -> tuple[objects_lib.GeomSpec, ..
     return tuple(geoms) + (inert,) * (shape.parts - len(geoms))
 
 
+def shape_for(model: mujoco.MjModel) -> UniformShape:
+    """The default UniformShape of a scene: 4 parts (every named and sampled object fits),
+    or the next power of two of its part count when it has more (decomposed meshes)."""
+    n = len(scene_lib.scene_ids(model).object_geoms)
+    return UniformShape(parts=max(4, 1 << max(n - 1, 0).bit_length()))
+
+
 def uniform_spec(spec: objects_lib.ObjectSpec,
                  shape: UniformShape = UniformShape()) -> objects_lib.ObjectSpec:
     """``spec`` as ``shape.parts`` mesh parts (resampled hulls, inert parts appended). Its
@@ -267,37 +276,51 @@ def resample_distances(model: mujoco.MjModel,
 # ----------------------------------------------------------------------------- scene
 
 
-def _check_same_gripper(exact: mujoco.MjModel, uni: mujoco.MjModel) -> None:
-    """The uniform scene must differ from the exact one in the object's geoms only."""
+_OPT_FIELDS = ("timestep", "impratio", "tolerance", "ls_tolerance", "noslip_tolerance",
+               "gravity", "wind", "density", "viscosity", "o_margin", "o_solref", "o_solimp",
+               "o_friction", "integrator", "cone", "jacobian", "solver", "iterations",
+               "ls_iterations", "noslip_iterations", "disableflags", "enableflags")
+
+
+_BODY_FIELDS = ("body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass",
+                "body_subtreemass", "body_inertia", "body_invweight0", "body_gravcomp")
+
+
+def _transplant(exact: mujoco.MjModel, uni: mujoco.MjModel) -> None:
+    """Copies into ``uni`` everything of ``exact`` outside the object's geoms: options,
+    joints, dofs, actuators, bodies and the other geoms (matched by name), so that a scene
+    edited after its build (gains, frictions, masses) keeps its edits."""
     e_ids, u_ids = scene_lib.scene_ids(exact), scene_lib.scene_ids(uni)
-    e_other = [g for g in range(exact.ngeom) if g not in e_ids.object_geoms]
-    u_other = [g for g in range(uni.ngeom) if g not in u_ids.object_geoms]
-    checks = {
-        "opt.timestep": (exact.opt.timestep, uni.opt.timestep),
-        "opt.iterations": (exact.opt.iterations, uni.opt.iterations),
-        "opt.ls_iterations": (exact.opt.ls_iterations, uni.opt.ls_iterations),
-        "opt.impratio": (exact.opt.impratio, uni.opt.impratio),
-        "opt.integrator": (exact.opt.integrator, uni.opt.integrator),
-        "opt.cone": (exact.opt.cone, uni.opt.cone),
-        "opt.disableflags": (exact.opt.disableflags, uni.opt.disableflags),
-        "actuator_gainprm": (exact.actuator_gainprm, uni.actuator_gainprm),
-        "actuator_biasprm": (exact.actuator_biasprm, uni.actuator_biasprm),
-        "actuator_forcerange": (exact.actuator_forcerange, uni.actuator_forcerange),
-        "actuator_ctrlrange": (exact.actuator_ctrlrange, uni.actuator_ctrlrange),
-        "dof_damping": (exact.dof_damping, uni.dof_damping),
-        "dof_armature": (exact.dof_armature, uni.dof_armature),
-        "jnt_range": (exact.jnt_range, uni.jnt_range),
-        "geom_size": (exact.geom_size[e_other], uni.geom_size[u_other]),
-        "geom_friction": (exact.geom_friction[e_other], uni.geom_friction[u_other]),
-        "object friction": (exact.geom_friction[list(e_ids.object_geoms)][:1],
-                            uni.geom_friction[list(u_ids.object_geoms)][:1]),
-        "body_mass": (np.delete(exact.body_mass, e_ids.object_body),
-                      np.delete(uni.body_mass, u_ids.object_body)),
-    }
-    for name, (a, b) in checks.items():
-        if np.shape(a) != np.shape(b) or not np.array_equal(a, b):
-            raise ValueError(f"the model is not a scene of scene.scene_xml: its {name} is "
-                             f"not reproduced by scene.scene_config")
+    if (exact.nbody, exact.njnt, exact.nv, exact.nu) != (uni.nbody, uni.njnt, uni.nv, uni.nu):
+        raise ValueError("the model is not a grasp scene of scene.scene_xml (its bodies, "
+                         "joints or actuators differ from the uniform scene's)")
+    for name in _OPT_FIELDS:
+        value = getattr(exact.opt, name)
+        setattr(uni.opt, name, value.copy() if isinstance(value, np.ndarray) else value)
+    other = [(mujoco.mj_id2name(exact, mujoco.mjtObj.mjOBJ_GEOM, g), g)
+             for g in range(exact.ngeom) if g not in e_ids.object_geoms]
+    u_other = [mujoco.mj_name2id(uni, mujoco.mjtObj.mjOBJ_GEOM, n) for n, _ in other]
+    if min(u_other, default=0) < 0 or len(u_other) != uni.ngeom - len(u_ids.object_geoms):
+        raise ValueError("the model's gripper and table geoms differ from the uniform scene's")
+    e_other = [g for _, g in other]
+    for name in dir(exact):
+        if not (name.startswith(("actuator_", "jnt_", "dof_", "geom_"))
+                or name in _BODY_FIELDS):
+            continue
+        src = getattr(exact, name)
+        if not isinstance(src, np.ndarray):
+            continue
+        dst = getattr(uni, name)
+        if name.startswith("geom_"):
+            dst[u_other] = src[e_other]
+        elif src.shape == dst.shape:
+            dst[...] = src
+    uni.qpos0[:] = exact.qpos0
+    uni.qpos_spring[:] = exact.qpos_spring
+    for g in u_ids.object_geoms:  # the object's contact settings, from its first part
+        for name in ("geom_friction", "geom_solref", "geom_solimp", "geom_solmix",
+                     "geom_priority", "geom_condim", "geom_contype", "geom_conaffinity"):
+            getattr(uni, name)[g] = getattr(exact, name)[e_ids.object_geoms[0]]
 
 
 def uniform_scene(model: mujoco.MjModel,
@@ -321,34 +344,48 @@ def uniform_scene(model: mujoco.MjModel,
     inertial = (model.body_ipos[body], model.body_iquat[body], model.body_mass[body],
                 model.body_inertia[body])
     uni = mujoco.MjModel.from_xml_string(scene_lib.scene_xml(spec, config, inertial))
-    _check_same_gripper(model, uni)
-    uni.qpos0[:] = model.qpos0
+    _transplant(model, uni)
     return uni
 
 
 # ----------------------------------------------------------------------------- mjx models
 
 # Static fields of mjx.Model that hold per-object data no step reads: the raw mesh arrays
-# (mjx.put_model turns them into the padded convex data), the name table, the frame flags
-# (MJX always composes frames in full) and the sparse mass-matrix layout (unused with the
-# dense mass matrix that put_uniform selects; it depends on whether the exact inertia sits
-# at the body frame).
+# (mjx.put_model turns them into the padded convex data) and the frame flags (MJX always
+# composes frames in full). The name table is the same for every uniform scene.
 _FREE_STATIC = (
     "nmeshvert", "nmeshnormal", "nmeshtexcoord", "nmeshface", "nmeshgraph", "nmeshpoly",
-    "nmeshpolyvert", "nmeshpolymap", "nnames", "nnames_map",
+    "nmeshpolyvert", "nmeshpolymap",
     "mesh_vertadr", "mesh_vertnum", "mesh_faceadr", "mesh_normaladr", "mesh_normalnum",
     "mesh_texcoordadr", "mesh_texcoordnum", "mesh_graphadr", "mesh_vert", "mesh_normal",
     "mesh_face", "mesh_facenormal", "mesh_facetexcoord", "mesh_graph", "mesh_pos",
     "mesh_quat", "mesh_texcoord", "mesh_scale", "mesh_polynum", "mesh_polyadr",
     "mesh_polynormal", "mesh_polyvertadr", "mesh_polyvertnum", "mesh_polyvert",
     "mesh_polymapadr", "mesh_polymapnum", "mesh_polymap", "mesh_bvhadr", "mesh_bvhnum",
-    "mesh_octadr", "mesh_octnum", "mesh_pathadr", "names", "names_map", "paths", "npaths",
-    "geom_sameframe", "body_sameframe", "body_simple", "dof_simplenum", "nC", "M_rowadr",
-    "M_rownnz", "M_colind",
+    "mesh_octadr", "mesh_octnum", "mesh_pathadr",
+    "geom_sameframe", "body_sameframe", "body_simple", "dof_simplenum",
 )
 _EMPTIED = {"mesh_vert", "mesh_normal", "mesh_face", "mesh_facenormal", "mesh_facetexcoord",
-            "mesh_graph", "mesh_texcoord", "mesh_polynormal", "mesh_polyvert", "mesh_polymap",
-            "names_map", "M_colind"}
+            "mesh_graph", "mesh_texcoord", "mesh_polynormal", "mesh_polyvert", "mesh_polymap"}
+
+
+def general_mass_pattern(dof_parentid: np.ndarray) -> dict:
+    """The sparsity pattern of the mass matrix with no "simple" body: row i holds dof i's
+    ancestors and then i. MuJoCo drops the couplings of a body whose inertia sits at its
+    frame (a "simple" body: whether it is depends on the exact object), and MJX masks the
+    dense mass matrix with the pattern; the general pattern holds every coupling that any
+    object can have, and a coupling that is zero stays zero."""
+    rows = []
+    for i in range(len(dof_parentid)):
+        chain, j = [], int(dof_parentid[i])
+        while j >= 0:
+            chain.append(j)
+            j = int(dof_parentid[j])
+        rows.append(sorted(chain) + [i])
+    nnz = np.array([len(r) for r in rows], np.int32)
+    adr = np.concatenate([[0], np.cumsum(nnz)[:-1]]).astype(np.int32)
+    return {"nC": int(nnz.sum()), "M_rownnz": nnz, "M_rowadr": adr,
+            "M_colind": np.array([c for r in rows for c in r], np.int32)}
 
 
 def _pad(x: np.ndarray, size: int, axis: int, what: str) -> np.ndarray:
@@ -390,6 +427,10 @@ def _normalized(mx, shape: UniformShape):
             values[name] = type(v)()
         elif isinstance(v, (int, np.integer)):
             values[name] = 0
+    pattern = general_mass_pattern(mx.dof_parentid)
+    for name, v in pattern.items():
+        old = getattr(mx, name)
+        values[name] = np.asarray(v, old.dtype) if isinstance(old, np.ndarray) else v
     impl = mx._impl.replace(
         mesh_convex=tuple(_padded_convex(c, shape) for c in mx._impl.mesh_convex),
         geom_rbound_hfield=np.zeros_like(mx._impl.geom_rbound_hfield))  # no height fields
@@ -471,7 +512,7 @@ class UniformBatch:
       models: exact grasp scenes (``scene.build_scene``), one per object, all built with
         the same ``SceneConfig``.
       config: the trial.
-      shape: the uniform structure.
+      shape: the uniform structure (None: ``shape_for`` of the object with most parts).
       trials: trials per object per compiled call (calls are padded to it, so every call
         runs the one program).
 
@@ -483,15 +524,16 @@ class UniformBatch:
     """
 
     def __init__(self, models, config: sim_lib.TrialConfig = sim_lib.TrialConfig(),
-                 shape: UniformShape = UniformShape(), trials: int = 64):
+                 shape: UniformShape | None = None, trials: int = 64):
         models = list(models)
         if not models:
             raise ValueError("UniformBatch needs at least one model")
+        if shape is None:
+            shape = max((shape_for(m) for m in models), key=lambda s: s.parts)
         if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
             raise ValueError(f"trials must be an int >= 1, got {trials!r}")
         self.config, self.shape, self.trials = config, shape, trials
-        self.uniform = [m if _is_uniform(m, shape) else uniform_scene(m, shape)
-                        for m in models]
+        self.uniform = [uniform_scene(m, shape) for m in models]
         self.mx = stack_models([put_uniform(m, shape) for m in self.uniform])
         self.program = _objects_program(sim_lib.make_execute(config, self.uniform[0]))
         self.pose0 = np.stack([scene_lib.object_pose(m) for m in self.uniform])
@@ -544,11 +586,3 @@ class UniformBatch:
         success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
         return [sim_lib.TrialResult(success[i], nan[i], rise[i], gap[i], "mjx")
                 for i in range(o)]
-
-
-def _is_uniform(model: mujoco.MjModel, shape: UniformShape) -> bool:
-    ids = scene_lib.scene_ids(model)
-    return (len(ids.object_geoms) == shape.parts and model.nmesh == shape.parts
-            and model.names.startswith(b"sern_grasp_uniform\x00")
-            and all(model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
-                    for g in ids.object_geoms))

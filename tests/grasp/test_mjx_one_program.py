@@ -1,0 +1,193 @@
+"""One MJX trial program for every object (sern_jax.grasp.world.uniform).
+
+Every MJX check here runs through one compiled program: two different objects on a small
+uniform structure (2 parts of at most 12 vertices) and a 15-step trial, in which the jaws
+close on the object and start lifting it.
+"""
+
+import copy
+
+import jax
+import numpy as np
+import pytest
+
+from sern_jax.grasp.world import objects, scene, sim, uniform
+
+SHAPE = uniform.UniformShape(parts=2, vertices=12)
+SHORT = sim.TrialConfig(approach_steps=2, settle_steps=1, close_steps=8, lift_steps=4,
+                        shake_steps=0, hold_steps=0)
+NAMES = ("small_box", "tless_part_a")  # a box and two meshes (24 and 8 vertices)
+TRIALS = 2
+
+
+@pytest.fixture(scope="module")
+def exact():
+    return [scene.build_scene(objects.make_object(n), seed=0) for n in NAMES]
+
+
+@pytest.fixture(scope="module")
+def trials(exact):
+    grasps = np.stack([np.stack([scene.centred_grasp(m), scene.centred_grasp(m)
+                                 + [0.004, -0.003, 0.0, 0.2]]) for m in exact])
+    noise = [sim.sample_noise(jax.random.key(i), TRIALS, SHORT) for i in range(len(exact))]
+    return grasps, sim.TrialNoise(*(np.stack([n[k] for n in noise]) for k in range(3)))
+
+
+@pytest.fixture(scope="module")
+def batch(exact):
+    return uniform.UniformBatch(exact, SHORT, SHAPE, trials=TRIALS)
+
+
+@pytest.fixture(scope="module")
+def batch_results(batch, trials):
+    return batch.run_trials(*trials)
+
+
+def _rows(noise, idx):
+    return sim.TrialNoise(*(a[idx] for a in noise))
+
+
+def test_one_compiled_program_serves_different_objects(exact, batch, batch_results, trials):
+    grasps, noise = trials
+    swapped = uniform.UniformBatch(exact[::-1], SHORT, SHAPE, trials=TRIALS)
+    again = swapped.run_trials(grasps[::-1], _rows(noise, slice(None, None, -1)))
+    assert swapped.program is batch.program
+    assert batch.compiles == 1 and swapped.compiles == 1
+    for a, b in zip(batch_results, again[::-1]):
+        np.testing.assert_array_equal(a.success, b.success)
+        np.testing.assert_allclose(a.rise, b.rise, atol=1e-6)
+
+
+def test_batched_over_objects_equals_each_object_alone(exact, batch, batch_results, trials):
+    """Object i's trials in a batch with another object equal its trials in a batch of
+    itself twice (the same compiled program, the same uniform model)."""
+    grasps, noise = trials
+    for i, model in enumerate(exact):
+        alone = uniform.UniformBatch([model, model], SHORT, SHAPE, trials=TRIALS)
+        out = alone.run_trials(grasps[[i, i]], _rows(noise, [i, i]))
+        for res in out:
+            np.testing.assert_array_equal(res.success, batch_results[i].success)
+            np.testing.assert_allclose(res.rise, batch_results[i].rise, atol=1e-6)
+            np.testing.assert_allclose(res.gap, batch_results[i].gap, atol=1e-6)
+    assert batch.compiles == 1
+
+
+def test_native_and_mjx_agree_on_the_uniform_model(batch, batch_results, trials):
+    """Short paired trials: the jaws close on the object (its width, not the closed 0 gap)
+    and lift; native and MJX end within 1 mm of each other in gap and object rise."""
+    grasps, noise = trials
+    for i, model in enumerate(batch.uniform):
+        native = sim.GraspSimulator(model, "native", SHORT, num_threads=1).run_trials(
+            grasps[i], _rows(noise, i))
+        mjx = batch_results[i]
+        assert not native.nan.any() and not mjx.nan.any()
+        assert (native.gap > 0.01).all(), native.gap  # closed on the object
+        np.testing.assert_allclose(mjx.gap, native.gap, atol=1e-3)
+        np.testing.assert_allclose(mjx.rise, native.rise, atol=1e-3)
+        np.testing.assert_array_equal(mjx.success, native.success)
+
+
+@pytest.mark.slow
+def test_per_object_simulator_equals_the_batch(batch, batch_results, trials, exact):
+    """GraspSimulator's MJX backend on the uniform model (its own program, over trials
+    only) gives each object's batched results."""
+    grasps, noise = trials
+    for i, model in enumerate(exact):
+        one = sim.GraspSimulator(model, "mjx", SHORT, mjx_shape=SHAPE).run_trials(
+            grasps[i], _rows(noise, i))
+        np.testing.assert_array_equal(one.success, batch_results[i].success)
+        np.testing.assert_allclose(one.rise, batch_results[i].rise, atol=1e-5)
+        np.testing.assert_allclose(one.gap, batch_results[i].gap, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_full_trials_agree_native_and_mjx_on_uniform_models():
+    """The default trial, 8 paired trials on each of two objects: native and MJX agree on
+    at least 14 of 16 outcomes (the documented pooled agreement is about 95 %)."""
+    models = [scene.build_scene(objects.make_object(n), seed=0) for n in NAMES]
+    b = uniform.UniformBatch(models, sim.TrialConfig(), trials=8)
+    rng = np.random.default_rng(0)
+    grasps = np.stack([scene.centred_grasp(m) + np.c_[rng.uniform(-0.01, 0.01, (8, 3)),
+                                                       rng.uniform(-0.5, 0.5, 8)]
+                       for m in models])
+    noise = [sim.sample_noise(jax.random.key(i), 8) for i in range(2)]
+    stacked = sim.TrialNoise(*(np.stack([n[k] for n in noise]) for k in range(3)))
+    mjx = b.run_trials(grasps, stacked)
+    same = 0
+    for i, model in enumerate(b.uniform):
+        native = sim.GraspSimulator(model, "native", num_threads=1).run_trials(
+            grasps[i], noise[i])
+        same += int((native.success == mjx[i].success).sum())
+    assert same >= 14, same
+    assert b.compiles == 1
+
+
+# ----------------------------------------------------------------------------- no MJX runs
+
+
+@pytest.mark.parametrize("name", ["sphere", "capsule", "handle", "pipe_tee", "handle_jug",
+                                  "tless_part_a", "cylinder", "bracket"])
+def test_resampling_keeps_each_hull_within_the_stated_distance(name):
+    model = scene.build_scene(objects.make_object(name), seed=0)
+    shape = uniform.UniformShape()
+    for d, (kind, size, _pos, _quat, pts) in zip(uniform.resample_distances(model, shape),
+                                                 uniform._object_parts(model)):
+        assert d["relative"] <= uniform.RESAMPLE_TOLERANCE, (name, d)
+        verts = uniform.part_vertices(pts, shape.vertices)
+        assert len(verts) <= shape.vertices
+        if kind in ("box", "mesh") and len(uniform._hull_vertices(pts)) <= shape.vertices:
+            assert d["distance_m"] == 0.0, (name, d)  # exact hulls stay exact
+        # the resampled hull never reaches outside the exact part
+        exact_pts = uniform._surface_samples(kind, size, pts if kind == "mesh" else None)
+        assert uniform.hull_distance(verts, exact_pts if kind in ("box", "mesh")
+                                     else exact_pts * 1.001) < 1e-9
+
+
+def test_hull_distance_of_a_shrunk_cube():
+    cube = objects.geom_points("box", (1.0, 1.0, 1.0))
+    assert uniform.hull_distance(cube, cube) == 0.0
+    assert uniform.hull_distance(cube, 0.5 * cube) == pytest.approx(np.sqrt(3) * 0.5)
+    assert uniform.hull_distance(cube * [1, 1, 0.5], 0.5 * cube) == pytest.approx(
+        np.sqrt(0.5))
+
+
+def test_uniform_models_share_one_structure_and_stack():
+    models = [scene.build_scene(objects.make_object(n), seed=0)
+              for n in ("small_box", "sphere", "handle", "tless_part_b")]
+    mxs = [uniform.put_uniform(uniform.uniform_scene(m)) for m in models]
+    trees = {jax.tree_util.tree_structure(mx) for mx in mxs}
+    assert len(trees) == 1
+    stacked = uniform.stack_models(mxs)
+    assert stacked.body_mass.shape == (4, models[0].nbody)
+    # other array values per object: vertices, inertia, start pose
+    assert not np.allclose(stacked.body_inertia[0], stacked.body_inertia[1])
+    assert not np.allclose(stacked._impl.mesh_convex[0].vert[0], stacked._impl.mesh_convex[0].vert[2])
+    other = uniform.put_uniform(uniform.uniform_scene(models[0], SHAPE), SHAPE)
+    with pytest.raises(ValueError, match="static structure|shapes"):
+        uniform.stack_models([mxs[0], other])
+
+
+def test_uniform_scene_keeps_inertia_edits_and_the_general_mass_pattern(exact):
+    box, tless = exact
+    u = uniform.uniform_scene(tless)
+    u_ids = scene.scene_ids(u)
+    assert len(u_ids.object_geoms) == uniform.UniformShape().parts == u.nmesh
+    for field in ("body_mass", "body_inertia", "body_ipos", "qpos0", "dof_invweight0"):
+        np.testing.assert_array_equal(getattr(u, field)[..., :],
+                                      getattr(tless, field)[..., :], err_msg=field)
+    edited = copy.copy(box)
+    edited.actuator_gainprm[2, 0] = 123.0
+    assert uniform.uniform_scene(edited).actuator_gainprm[2, 0] == 123.0
+    # tless_part_a's inertia is off its body frame: MuJoCo's pattern is the general one
+    pattern = uniform.general_mass_pattern(u.dof_parentid)
+    np.testing.assert_array_equal(pattern["M_rownnz"], u.M_rownnz)
+    np.testing.assert_array_equal(pattern["M_colind"], u.M_colind)
+    assert pattern["nC"] == u.nC
+
+
+def test_objects_with_too_many_parts_are_refused(exact):
+    with pytest.raises(ValueError, match="parts"):
+        uniform.uniform_scene(exact[1], uniform.UniformShape(parts=1))
+    assert uniform.shape_for(exact[0]).parts == 4
+    with pytest.raises(ValueError, match="vertices"):
+        uniform.UniformShape(vertices=4)

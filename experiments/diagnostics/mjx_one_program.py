@@ -109,7 +109,8 @@ def main(argv=None) -> int:
     again = batch_rev.run_trials(grasps[rev], sim.TrialNoise(*(a[rev] for a in stacked)),
                                  poses[rev])[::-1]
     second_s = time.perf_counter() - t0
-    reorder_same = all(np.array_equal(a.success, b.success) for a, b in zip(mjx_res, again))
+    # Equal on a CPU; XLA's GPU reductions need not be deterministic (counted, not asserted).
+    reorder_differ = int(sum((a.success != b.success).sum() for a, b in zip(mjx_res, again)))
 
     native = {"exact": [], "uniform": []}
     native_s = {"exact": 0.0, "uniform": 0.0}
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
         "shape": {"parts": shape.parts, "vertices": shape.vertices, "faces": shape.faces,
                   "edges": shape.edges, "face_vertices": shape.face_vertices},
         "mjx_compiles": batch_rev.compiles,
-        "mjx_reversed_order_same_outcomes": bool(reorder_same),
+        "mjx_reversed_order_differing_trials": reorder_differ,
         "pooled": {
             "native_vs_mjx_uniform": _pair(cat(native["uniform"]), cat(mjx_res)),
             "exact_vs_uniform_native": _pair(cat(native["exact"]), cat(native["uniform"])),

@@ -14,7 +14,10 @@
   one context, one trial per backend), and the quality network's rates
   (:func:`quality_net_benchmark`).
 
-:func:`measure_agreement` is the paired native-vs-MJX agreement of trial outcomes. Every figure
+:func:`objects_benchmark` (``sern bench grasp --objects a,b,c``) times a batch of different
+objects per backend and counts the compiled MJX trial programs (``mjx_compiles``: 1, one program
+over objects x trials). :func:`measure_agreement` is the paired native-vs-MJX agreement of trial
+outcomes. Every figure
 is measured in the call on this machine (``machine``: :func:`sern_jax.infra.io.machine`); timings
 use :func:`sern_jax.infra.timing.time_calls`. The JSON fields are ``sern bench grasp --json``'s.
 """
@@ -28,8 +31,8 @@ from typing import Callable
 
 from sern_jax.infra import io, timing
 
-__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "quality_net_benchmark",
-           "random_grasps"]
+__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "objects_benchmark",
+           "quality_net_benchmark", "random_grasps"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +48,8 @@ class GraspBenchConfig:
     repeats: int = 2  # timed calls per setting
     quality_sets: int = 16  # 64-candidate sets per quality-network scoring call (0 skips)
     quality_batch: int = 64  # minibatch of the quality-network training-step timing
+    objects: tuple[str, ...] = ()  # a batch of objects for objects_benchmark; () skips
+    objects_trials: int = 64  # trials per object of objects_benchmark
 
 
 def random_grasps(key, model, n):
@@ -115,6 +120,57 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
     }
 
 
+def objects_benchmark(objects, trials_per_object: int, threads: int | None = None,
+                      repeats: int = 2, log: Callable[[str], None] | None = None) -> dict:
+    """Trials/s of a batch of different objects per backend, and ``mjx_compiles``.
+
+    Native: each object's ``GraspSimulator`` on ``threads``, one object after another. MJX:
+    ``uniform.UniformBatch``, one compiled ``jit(vmap(vmap(execute)))`` program over objects x
+    trials on the objects' uniform models. ``mjx_compiles`` is the number of distinct compiled
+    MJX trial programs after the batch ran in its order and in reverse (a new batch): 1 when
+    one program serves every object. Object i: resting pose seed i, ``trials_per_object``
+    grasps from ``random_grasps`` and noise from ``sim.sample_noise``.
+    """
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp.world import objects as objects_lib
+    from sern_jax.grasp.world import scene as scene_lib
+    from sern_jax.grasp.world import sim
+    from sern_jax.grasp.world import uniform
+
+    log = log or (lambda msg: None)
+    specs = [objects_lib.resolve_object(o) for o in objects]
+    models = [scene_lib.build_scene(spec, seed=i) for i, spec in enumerate(specs)]
+    n, key = trials_per_object, jax.random.key(0)
+    grasps = np.stack([random_grasps(jax.random.fold_in(key, i), m, n)
+                       for i, m in enumerate(models)])
+    noise = [sim.sample_noise(jax.random.fold_in(key, 1000 + i), n) for i in range(len(models))]
+    stacked = sim.TrialNoise(*(np.stack([z[k] for z in noise]) for k in range(3)))
+    total = n * len(models)
+    threads = threads or os.cpu_count()
+    natives = [sim.GraspSimulator(m, "native", num_threads=threads) for m in models]
+    tm = timing.time_calls(lambda: [s.run_trials(g, z) for s, g, z in zip(natives, grasps, noise)],
+                           repeats, warmup=1)
+    native = {"threads": threads, "trials_per_s": total / tm.best_s, "seconds": tm.best_s,
+              "success_rate": float(np.mean([r.success.mean() for r in tm.result]))}
+    log(f"objects native: {native['trials_per_s']:9.1f} trials/s ({len(models)} objects)")
+    t0 = time.perf_counter()
+    batch = uniform.UniformBatch(models, sim.TrialConfig(), trials=n)
+    models_s = time.perf_counter() - t0
+    tm = timing.time_calls(lambda: batch.run_trials(grasps, stacked), repeats, warmup=1)
+    reverse = uniform.UniformBatch(models[::-1], sim.TrialConfig(), batch.shape, trials=n)
+    reverse.run_trials(grasps[::-1], sim.TrialNoise(*(a[::-1] for a in stacked)))
+    mjx = {"trials_per_s": total / tm.best_s, "seconds": tm.best_s, "first_call_s": tm.first_s,
+           "compile_s": max(tm.first_s - tm.best_s, 0.0), "models_s": models_s,
+           "parts": batch.shape.parts, "vertices": batch.shape.vertices,
+           "success_rate": float(np.mean([r.success.mean() for r in tm.result]))}
+    log(f"objects mjx:    {mjx['trials_per_s']:9.1f} trials/s, {reverse.compiles} compiled "
+        f"program(s) (first call {tm.first_s:.1f} s)")
+    return {"objects": [s.name for s in specs], "trials_per_object": n,
+            "mjx_compiles": reverse.compiles, "native": native, "mjx": mjx}
+
+
 def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
                     log: Callable[[str], None] | None = None) -> dict:
     """Runs the measurements of ``cfg`` in this process; returns the JSON object of
@@ -183,6 +239,9 @@ def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
         backends["mjx"] = {"batches": rows, "compile_s": compile_s}
         stages["mjx_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
     out["backends"] = backends
+    if cfg.objects:
+        out["objects"] = objects_benchmark(cfg.objects, cfg.objects_trials, threads, repeats, log)
+        out["mjx_compiles"] = out["objects"]["mjx_compiles"]
 
     # Depth images and candidate sets (depth.py and candidates.py on this scene).
     if depth_batch:

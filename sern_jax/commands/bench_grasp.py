@@ -1,11 +1,13 @@
 """``sern bench grasp``: throughput of the grasp pipeline, one JSON object.
 
 The measurements (trials/s per backend and batch, depth images/s, candidate sets/s,
-contexts/s, a time split per stage, the quality network's rates, and with ``--agreement N``
-the paired native-vs-MJX agreement) are :mod:`sern_jax.bench.grasp`
-(``grasp_benchmark``, ``measure_agreement``); this module parses and checks the flags, calls
-them, prints the JSON and writes ``--out``. Every figure is measured in this run on this
-machine (``machine`` in the output).
+contexts/s, a time split per stage, the quality network's rates, with ``--objects a,b,c``
+trials/s of that batch of objects per backend and ``mjx_compiles`` (MJX: one compiled
+program over objects x trials), and with ``--agreement N`` the paired native-vs-MJX
+agreement) are :mod:`sern_jax.bench.grasp` (``grasp_benchmark``, ``objects_benchmark``,
+``measure_agreement``); this module parses and checks the flags, calls them, prints the
+JSON and writes ``--out``. Every figure is measured in this run on this machine
+(``machine`` in the output).
 """
 
 from __future__ import annotations
@@ -61,6 +63,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="64-candidate sets per quality-network scoring call (0 = skip)")
     p.add_argument("--quality-batch", type=int, default=64,
                    help="minibatch of the quality-network training-step timing")
+    p.add_argument("--objects", default="",
+                   help="a batch of objects (csv) timed per backend, MJX as one program over "
+                        "objects x trials (reports mjx_compiles); trials per object: the largest "
+                        "--mjx-batch")
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.set_defaults(func=run)
     return p
@@ -101,6 +107,18 @@ def _validate(args) -> None:
         from sern_jax.infra import validate
 
         validate.out_file(args.out, "--out")  # a temporary file is tried where it would go
+    if args.objects.strip():
+        from sern_jax.grasp.world import objects as objects_lib
+
+        names = args.objects.split(",")
+        if not all(names) or len(set(names)) != len(names):
+            raise ValueError(f"--objects must be distinct comma-separated names, got "
+                             f"{args.objects!r}")
+        for n in names:
+            try:
+                objects_lib.resolve_object(n)
+            except (ValueError, OSError) as e:
+                raise ValueError(f"--objects: {e}") from None
     if args.agreement:
         from sern_jax.grasp.world import objects as objects_lib
 
@@ -133,7 +151,10 @@ def run(args) -> int:
             context_poses=(4,) if quick else tuple(_csv_ints(args.context_poses,
                                                              "--context-poses")),
             threads=args.threads, repeats=1 if quick else args.repeats,
-            quality_sets=args.quality_sets, quality_batch=args.quality_batch)
+            quality_sets=args.quality_sets, quality_batch=args.quality_batch,
+            objects=tuple(n for n in args.objects.split(",") if n),
+            objects_trials=8 if quick else max(_csv_ints(args.mjx_batch, "--mjx-batch")
+                                               or [64]))
         try:
             objects_lib.resolve_object(args.object)
         except (ValueError, OSError) as e:

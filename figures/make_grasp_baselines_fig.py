@@ -1,4 +1,4 @@
-"""The baselines comparison (issue 18), from ``experiments.grasp_baselines``' saved files only.
+"""The baselines comparison, from ``experiments.grasp_baselines``' saved files only.
 
     python -m figures.make_grasp_baselines_fig [--out experiments/results/grasp_baselines]
 

@@ -34,7 +34,7 @@ NAMES = (
     "alg1_argmax_literal",
     # the paper's experimental setting
     "exp_fixed_alpha",
-    # Theorems 1, 3, 4, Assumption 3 and Algorithm 1 on a real neural estimator (issue 19)
+    # Theorems 1, 3, 4, Assumption 3 and Algorithm 1 on a real neural estimator
     "n1_neural_floor",
     "a3_neural_error",
     "t3_neural_inequality",

@@ -1,4 +1,4 @@
-"""Long-horizon float32 sums (issue 9 item 2): the regret and compensator accumulators of both
+"""Long-horizon float32 sums: the regret and compensator accumulators of both
 runners are compensated, so they do not stall when the total's spacing exceeds the increment."""
 
 import jax

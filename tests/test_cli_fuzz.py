@@ -102,7 +102,7 @@ def test_bad_flag_value(base, extra, flag, tmp_path, monkeypatch, capsys):
 
 
 # ----------------------------------------------------------------------------- grasp commands
-# Issue 16: every case of the probe (the silent NaN of --alpha 1e-300, sizes that ran out of
+# Every case of the probe (the silent NaN of --alpha 1e-300, sizes that ran out of
 # memory or never ended, output paths that failed after the work, argparse's usage block), all
 # refused in one line naming the flag, exit 2, nothing written, before any compile.
 

@@ -1,4 +1,4 @@
-"""Ray scale-out (sern_jax.infra.distributed, issue 20): a Ray run writes the same files as the
+"""Ray scale-out (sern_jax.infra.distributed): a Ray run writes the same files as the
 single-process run, resumes, retries killed workers, and stops on a failing unit in one line.
 
 The default run uses one local Ray with 2 CPUs for the whole module (started once, ~4 s).

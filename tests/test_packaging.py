@@ -1,4 +1,4 @@
-"""Packaging and the import graph of the commands (issue 15).
+"""Packaging and the import graph of the commands.
 
 * installing sern_jax adds only ``sern_jax`` to the top-level import namespace: the script
   folders install as ``sern_jax.experiments``, ``sern_jax.figures``, ``sern_jax.proofs_check``;

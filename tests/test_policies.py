@@ -134,7 +134,7 @@ def test_unknown_policy_raises():
         policies.policy_probs("nope", jax.random.key(0), None, 1.0, None)
 
 
-# ---------------------------------------------------------------- validity masks (issue 10, #3)
+# ---------------------------------------------------------------- validity masks
 
 masks = hnp.arrays(np.bool_, (K,))
 nonempty_masks = masks.filter(lambda m: m.any())

@@ -94,7 +94,7 @@ def _copy(src, dst):
 
 @pytest.mark.parametrize("chunk", ["7", "60"])
 def test_rerun_with_another_chunk_size_never_mixes_layouts(run_dir, tmp_path, chunk):
-    # Issue 9 item 1: a rerun with another --chunk-size used to merge both layouts (duplicated
+    # A rerun with another --chunk-size used to merge both layouts (duplicated
     # seeds, wrong R_T, summary saying S seeds). Now the saved seeds are reused or recomputed
     # and the merged results equal the first run's exactly.
     out = _copy(run_dir, tmp_path / "d")
@@ -140,7 +140,7 @@ def test_metadata_after_resume_times_every_policy(run_dir, tmp_path):
 @pytest.mark.parametrize("bad", [["--devices", "4"], ["--devices", "0"], ["--alpha", "0.5"],
                                  ["--seed", "99999999999999999999"]])
 def test_failed_command_leaves_a_finished_run_untouched(run_dir, tmp_path, bad, capsys):
-    # Issue 9 item 4: `--devices 4` on a finished directory exited 2 after rewriting config.json.
+    # `--devices 4` on a finished directory exited 2 after rewriting config.json.
     out = _copy(run_dir, tmp_path / "d")
     before = _snapshot(out)
     assert cli.main(ARGS + bad + ["--out", str(out), "--no-figures"]) == 2
@@ -157,7 +157,7 @@ def test_failed_command_creates_no_directory(tmp_path):
 @pytest.mark.parametrize("argv,limit", [(["--alpha", "1e-40"], "1.18e-38"),
                                         (["--alpha", "1e-300"], "1e-300")])
 def test_alpha_below_smallest_normal_is_refused(argv, limit, tmp_path, capsys):
-    # Issue 9 item 3: --alpha 1e-40 passed validation and gave NaN rows with exit 0.
+    # --alpha 1e-40 passed validation and gave NaN rows with exit 0.
     out = tmp_path / "x"
     assert cli.main(ARGS + argv + ["--out", str(out)]) == 2
     err = capsys.readouterr().err
@@ -184,7 +184,7 @@ def test_tiny_normal_alpha_gives_finite_results(tmp_path):
 @pytest.mark.parametrize("how", ["truncate", "empty", "random"])
 def test_damaged_seed_chunk_is_recomputed(run_dir, tmp_path, how, capsys):
     """A damaged chunk file is set aside and its seeds computed again: the same results as
-    the run that never lost it (issue 16)."""
+    the run that never lost it."""
     out = tmp_path / "damaged"
     (out / "chunks").mkdir(parents=True)
     for path in sorted((run_dir / "chunks").glob("*.npz")):

@@ -1,4 +1,4 @@
-"""`sern regret --no-per-seed` (issue 20): the run keeps on-device summaries over seeds, and its
+"""`sern regret --no-per-seed`: the run keeps on-device summaries over seeds, and its
 summary.json equals the per-seed run's, up to float rounding; quantile brackets hold the exact
 quantiles; an interrupted run resumes."""
 

@@ -1,5 +1,5 @@
 """Seed intervals (Student t), paired differences with Holm, and the independent-trials
-oracle / best-arm estimate (issue 17)."""
+oracle / best-arm estimate."""
 
 import math
 

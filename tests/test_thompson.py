@@ -1,4 +1,4 @@
-"""Exact fast Thompson sampling (issue 20): the Beta sampler against scipy's Beta (KS, with a
+"""Exact fast Thompson sampling: the Beta sampler against scipy's Beta (KS, with a
 wrong-parameter control that must fail), the batched runner against the general one."""
 
 import dataclasses

@@ -1,7 +1,7 @@
 """``sern bench neural``: seed-rounds per second of the neural runner beside a per-seed Python
 loop over the same JAX functions (:mod:`sern_jax.bench.neural`).
 
-Default workload (issue 19): the wheel bandit at δ = 0.95, Neural-Linear Thompson sampling
+Default workload: the wheel bandit at δ = 0.95, Neural-Linear Thompson sampling
 on a one-hidden-layer MLP (50 units) updated every 50 rounds by 20 Adam steps of 64 rows,
 1,000 seeds × 5,000 rounds. Compile time is reported apart; the Python loop runs
 ``--loop-seeds`` × ``--loop-rounds`` (its rate does not depend on the seed count).

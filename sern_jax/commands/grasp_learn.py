@@ -86,7 +86,7 @@ def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/d0", help="dataset directory")
     p.add_argument("--no-progress", action="store_true")
-    from sern_jax.infra import distributed  # --ray [ADDRESS]: shards as Ray tasks (issue 20)
+    from sern_jax.infra import distributed  # --ray [ADDRESS]: shards as Ray tasks
 
     distributed.add_arguments(p)
     p.set_defaults(func=_run_dataset)

@@ -132,7 +132,7 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
                    help="keep statistics over seeds reduced on the device (means, variances, "
                         "min/max, histogram quantiles: kilobytes per chunk) instead of "
                         "per-seed arrays; for very many seeds (no slope interval, no figures)")
-    from sern_jax.infra import distributed  # --ray [ADDRESS]: seed chunks as Ray tasks (issue 20)
+    from sern_jax.infra import distributed  # --ray [ADDRESS]: seed chunks as Ray tasks
 
     distributed.add_arguments(p)
     p.set_defaults(func=functools.partial(run, defaults=defaults, run_experiment=run_experiment,

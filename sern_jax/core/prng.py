@@ -11,7 +11,7 @@ K = 64 on 2 cores). Here:
 
 * min(a, b) ∈ {1, 2} has an exact form with no rejection, by order statistics (Rényi's
   representation; for m = 1 it is the inversion Beta(1, b) = 1 − U^{1/b},
-  Beta(a, 1) = U^{1/a}); since 2026-11-24 (issue 20) m = 2 too, one of the commonest
+  Beta(a, 1) = U^{1/a}); m = 2 too, one of the commonest
   Thompson posteriors (one success or one failure), where BB accepted only ~0.80;
 * otherwise Cheng's (1978) algorithm BB, the rejection sampler R's ``rbeta`` uses: one pair
   of uniforms per try, accepted with probability 0.80–0.96; a lane is one case or the

@@ -50,7 +50,7 @@ class RegretExperiment:
     float64: bool = False
     devices: int = 1
     # False: keep on-device summaries over seeds (executor.run_seeds(summary=True): means,
-    # variances, min/max, histogram quantiles) instead of per-seed arrays (issue 20)
+    # variances, min/max, histogram quantiles) instead of per-seed arrays
     per_seed: bool = True
 
     def fingerprint(self) -> str:

@@ -2,7 +2,7 @@
 
 The run directories already resume by unit of work: a regret seed chunk, a D0 shard, a grid
 cell, a grasp-learning object (all its learner copies: ``sern_jax.grasp.online.learn_units``). This module runs such units as Ray tasks instead of in the calling process, so that one
-command spreads over every core of a machine or over a cluster (issue 20):
+command spreads over every core of a machine or over a cluster:
 
 * a :class:`Unit` is ``fn(*args)``: a module-level function that computes one unit and
   writes its result file(s) atomically (``io.save_npz`` / ``io.save_json``: temporary file,

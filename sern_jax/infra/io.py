@@ -20,7 +20,7 @@ the directory, the holder's pid, host, start time and command). The kernel drops
 when its process dies (``kill -9`` included), so a killed run leaves no stale lock: the file
 stays, unlocked, and the next run takes it. On one machine this is exact. On a cluster: Linux
 maps ``flock`` on NFS to a POSIX lock held by the NFS server (NFSv4 releases it when the dead
-client's lease expires, ~90 s); some parallel filesystems (Lustre without ``-o flock``) refuse
+client's lock times out, about 90 s); some parallel filesystems (Lustre without ``-o flock``) refuse
 it, and then :func:`run_lock` raises ``RunLockedError`` naming the filesystem error rather than
 running unlocked. With Ray, the driver process holds the run directory's lock and the workers
 write only deterministic unit files (atomically, by ``os.replace``): two workers computing the

@@ -67,7 +67,7 @@ network's own estimate, ``r = r̂_θ(x) + φ·β + ε`` with the same prior on �
 is the closed form above fitted to the residuals ``y − r̂_θ(x)`` and every score is
 ``r̂_θ(x) + φ·(...)``: with no data the learner acts on r̂, as every other learner does. (With
 a prior mean of 0, a posterior fitted on C alone throws θ0's knowledge away: on the grasp hard
-set it started ~7 points of greedy success below θ0's head, issue 18.) ``zero``: the
+set it started ~7 points of greedy success below θ0's head.) ``zero``: the
 Showdown's β ~ N(0, σ²/λ I) on the raw rewards (the learner before this option).
 """
 

@@ -31,7 +31,7 @@ LEARNERS: dict[str, LearnerSpec] = {
     "egreedy": LearnerSpec(egreedy.egreedy, egreedy.EGreedyConfig,
                            "ε-greedy on r̂ (--epsilon)"),
     "greedy": LearnerSpec(greedy.greedy, greedy.GreedyConfig, "argmax r̂"),
-    # the baselines (issue 18): one module each, defaults from their papers
+    # the baselines: one module each, defaults from their papers
     "neural_linucb": LearnerSpec(
         neural_linear.neural_linucb, neural_linear.NeuralLinUCBConfig,
         "Neural-Linear UCB on last-layer features (--lambda-prior, --a0, --b0, --ucb-width)"),

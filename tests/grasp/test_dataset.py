@@ -131,7 +131,7 @@ def _damage(path, how):
 def test_damaged_shard_is_refused_by_load_and_recomputed_by_generate(tiny_dataset, tmp_path,
                                                                       how):
     """A damaged shard is never counted as done: load names it in one line, a rerun of
-    generate sets it aside and recomputes the same arrays (issue 16)."""
+    generate sets it aside and recomputes the same arrays."""
     from sern_jax.infra import io
 
     config, first = tiny_dataset

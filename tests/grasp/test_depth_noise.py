@@ -1,4 +1,4 @@
-"""The optional RealSense-like depth noise (issue 17): σ grows with range as stated, holes
+"""The optional RealSense-like depth noise: σ grows with range as stated, holes
 appear at the stated rates (more beside depth jumps), holes are filled, and it is off by
 default."""
 

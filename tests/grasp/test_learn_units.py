@@ -1,4 +1,4 @@
-"""sern_jax.grasp.online.learn_units' split and join (the Ray learning run's checkpoints, issue 20),
+"""sern_jax.grasp.online.learn_units' split and join (the Ray learning run's checkpoints),
 on synthetic arrays: no learning run, no Ray (the runs themselves are tests/test_distributed.py's
 slow tests)."""
 

@@ -1,6 +1,6 @@
 """Real and broken meshes: scans that are not watertight load with one warning, the units
 guess is reported, and every mesh error is one line naming the file, what is wrong and the
-CLI flag to use (issue 9, "Real meshes" and "Misleading messages")."""
+CLI flag to use."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The hard-set screen values the chosen best candidate on fresh trials (issue 17): an
+"""The hard-set screen values the chosen best candidate on fresh trials: an
 object whose candidates all succeed 40 % of the time must not qualify, although the
 maximum of its 64 eight-trial frequencies averages about 0.8."""
 

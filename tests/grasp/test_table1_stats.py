@@ -1,5 +1,5 @@
 """Table I's spread statistics: table.json rows carry sd (ddof 1) and se beside the old std
-(ddof 0), and the paper's parenthesised values are standard errors (issue 17)."""
+(ddof 0), and the paper's parenthesised values are standard errors."""
 
 import math
 

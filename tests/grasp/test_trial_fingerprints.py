@@ -1,5 +1,5 @@
-"""The simulated world (gripper, trial) is part of every run directory's fingerprint
-(issue 17): D0 made under the 6 N trial, θ0 pretrained on it and learn runs with it can
+"""The simulated world (gripper, trial) is part of every run directory's fingerprint: D0
+made under the 6 N trial, θ0 pretrained on it and learn runs with it can
 never be mixed with those of the 20 N trial in one directory."""
 
 import dataclasses

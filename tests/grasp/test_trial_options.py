@@ -1,4 +1,4 @@
-"""Trial options for the defensibility checks (issue 17): ``sim.refine`` keeps the trial's
+"""Trial options for the defensibility checks: ``sim.refine`` keeps the trial's
 physical schedule at a smaller step, and a refined trial on a simple grasp agrees with the
 default one."""
 

@@ -1,6 +1,6 @@
 """The simulated world of an online run (scene physics, trial randomisation, depth noise)
 is a choice of the caller, reaches the contexts and the trials, and is part of the run's
-identity (issue 17: sensitivity and sim-to-sim transfer)."""
+identity."""
 
 import numpy as np
 import pytest

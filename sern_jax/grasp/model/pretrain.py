@@ -262,7 +262,7 @@ HARD_RULES = ("fresh", "lcb")
 
 def best_candidate_lcb(successes, trials, valid, level: float = LCB_LEVEL) -> dict:
     """A lower confidence bound on the best candidate's success from the screening trials
-    alone (the alternative to fresh trials that issue 17 names).
+    alone (the alternative to valuing it on fresh trials).
 
     Every valid (pose, candidate) gets a one-sided Clopper–Pearson lower bound at level
     1 − (1 − level)/N, N the number of valid pairs (Bonferroni), so with probability at

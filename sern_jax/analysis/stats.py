@@ -17,10 +17,9 @@ Every interval over seeds takes Student's t with n − 1 degrees of freedom (``t
 ``paired_differences``), never a normal quantile: at n = 5 the normal interval is 29 % too
 narrow (t_{0.975, 4} = 2.776). The theory checks (``proofs_check.framework.mean_cell``) use the
 same t interval, with the matching one-sided t-test p-value (``t_pvalue``) and power statement
-(``t_detectable_excess``), so a check's interval and its verdict agree. (The normal-quantile
-``mean_ci`` that the checks used before is gone: no caller was an interval over anything but
-seeds.) ``mean_pvalue`` and ``mean_detectable_excess`` keep the normal form for a bootstrap
-cell, whose spread is fitted by a normal, not estimated from n − 1 degrees of freedom.
+(``t_detectable_excess``), so a check's interval and its verdict agree. ``mean_pvalue`` and
+``mean_detectable_excess`` keep the normal form for a bootstrap cell, whose spread is fitted
+by a normal, not estimated from n − 1 degrees of freedom.
 
 Estimates of a maximum (the best candidate of a context, the regret oracle's argmax) are
 valued on trials independent of those that chose it (``independent_best``,

@@ -77,7 +77,7 @@ def _validate(args) -> None:
         raise ValueError("--smpybandits-seeds must be 0 (skip) or >= 2 (for a standard error)")
     if args.smpybandits_seeds and args.policy != "thompson":
         raise ValueError("--smpybandits-seeds needs --policy thompson (SMPyBandits' softmax "
-                         "is not SERN's, see the README)")
+                         "is not SERN's: it divides by 1 + N)")
     for name, value, high in (("--arms", args.arms, 2**20), ("--seeds", args.seeds, 2**31 - 1),
                               ("--numpy-seeds", args.numpy_seeds, 2**31 - 1),
                               ("--smpybandits-seeds", args.smpybandits_seeds, 2**31 - 1),

@@ -27,7 +27,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("--quick", action="store_true",
-                   help="small sizes (minutes on 2 CPU cores); part of the default test run")
+                   help="small sizes; part of the default test run")
     p.add_argument("--only", nargs="+", metavar="NAME", default=None,
                    help="run only these checks (names as in the table)")
     p.add_argument("--seeds", type=int, default=None, metavar="N",

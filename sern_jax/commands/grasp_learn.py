@@ -1,7 +1,8 @@
 """``sern grasp dataset | pretrain | screen | learn``: arguments only; work happens in
 :mod:`dataset`, :mod:`pretrain` and :mod:`driver` (imported inside each command, so
-``sern --help`` stays fast: only the learners' registry is imported up front, ~0.75 s of
-jax/optax imports, so that every registered learner's hyperparameters are flags). Figures are handed in by :mod:`sern_jax.commands.main`."""
+``sern --help`` stays fast: only the learners' registry and its jax/optax imports are
+loaded up front, so that every registered learner's hyperparameters are flags). Figures are
+handed in by :mod:`sern_jax.commands.main`."""
 
 from __future__ import annotations
 
@@ -362,8 +363,8 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
     p.add_argument("--backend", choices=("native", "mjx"), default="native",
                    help="physics of the trials: native MuJoCo on the CPU's cores, or MJX "
                         "(for a GPU: one compile per object, then batches of "
-                        "config.MJX_BATCH trials); outcomes of the two agree on ~95%% of "
-                        "trials, not bit for bit, so tables differ")
+                        "config.MJX_BATCH trials); outcomes of the two agree on most "
+                        "trials but not bit for bit, so tables differ")
     p.add_argument("--out", default=None, help="run directory (default runs/learn-<hash>)")
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
     p.add_argument("--no-figures", action="store_true")

@@ -125,7 +125,7 @@ def import_mjx_quietly() -> None:
             print(line, file=sys.stderr)
 
 
-_MAX_TRIALS = 4096  # 64 candidates x 4096 trials = 262,144 grasps: minutes, ~1 GB
+_MAX_TRIALS = 4096  # 64 candidates x 4096 trials = 262,144 grasps: bounds one call's time and memory
 
 
 def _check_arguments(args) -> None:

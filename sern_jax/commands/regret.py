@@ -1,8 +1,9 @@
 """``sern regret``: regret curves for several policies over many seeds.
 
-This module owns the command's arguments only. The experiment and the figures live in the
-script folders (``sern_jax/experiment/regret.py``, ``figures/make_regret_figs.py``), which library
-modules never import: :mod:`sern_jax.commands.main` imports them and hands them to :func:`add_parser`.
+This module owns the command's arguments only. The experiment lives in
+:mod:`sern_jax.experiment.regret` and the figures in the script folder
+(``figures/make_regret_figs.py``), which library modules never import:
+:mod:`sern_jax.commands.main` imports both and hands them to :func:`add_parser`.
 """
 
 from __future__ import annotations

@@ -27,8 +27,8 @@ __all__ = ["add_parser", "run", "LEARN_FULL", "LEARN_QUICK"]
 
 LEARN_FULL = {"objects": 6, "seeds": 5, "rounds": 5}
 LEARN_QUICK = {"objects": 3, "seeds": 3, "rounds": 3}
-# Expected wall times on the project's idle 2-core machine (measured, see README), for the
-# estimate printed before a run starts.
+# Expected wall times of each part, for the estimate printed before a run starts
+# (calibrated from experiments/results/reproduce).
 EXPECTED_S = {"check": 120, "regret": 50, "learn_full": 300, "learn_quick": 120}
 
 
@@ -46,8 +46,7 @@ def add_parser(subparsers, *, check_run: Callable, regret_defaults, run_regret: 
             "plus a summary on the terminal. Each part saves its own results and resumes "
             "when rerun with the same --out."))
     p.add_argument("--quick", action="store_true",
-                   help="3 objects x 3 seeds x 3 rounds of grasp learning (under 10 min on 2 "
-                        "CPU cores)")
+                   help="3 objects x 3 seeds x 3 rounds of grasp learning")
     p.add_argument("--out", default=None, help="run directory (default runs/reproduce-<time>)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=lambda args: run(

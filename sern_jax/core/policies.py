@@ -2,7 +2,7 @@
 
 Every policy maps what it knows this round to an action distribution ``π`` over ``K`` arms.
 SERN's policy is the maximiser of ``E_π[r̂] + α S(π)`` (Algorithm 1), i.e. the textbook
-softmax ``π = softmax(r̂ / α)``; unlike several peer libraries (see README) nothing else is
+softmax ``π = softmax(r̂ / α)``; unlike several peer libraries, nothing else is
 mixed in. *Index policies* (Thompson sampling, Boltzmann-Gumbel) draw a random index per arm
 and play its argmax; their ``π`` is not available in closed form, so they return the one-hot
 vector of the arm they chose, an unbiased one-sample estimate of ``π``.

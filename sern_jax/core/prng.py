@@ -6,8 +6,7 @@
 :func:`sample_beta` draws Beta(a, b) for a, b ≥ 1 (Thompson sampling's Beta(1 + S, 1 + F)
 posteriors) *exactly*, in a form that suits ``vmap`` and SIMD lanes. ``jax.random.beta`` draws
 two Gammas by rejection in a ``while_loop`` per element, so under ``vmap`` every lane waits for
-the slowest one and each try re-derives keys (measured 0.039M seed-rounds/s for Thompson at
-K = 64 on 2 cores). Here:
+the slowest one and each try re-derives keys. Here:
 
 * min(a, b) ∈ {1, 2} has an exact form with no rejection, by order statistics (Rényi's
   representation; for m = 1 it is the inversion Beta(1, b) = 1 − U^{1/b},
@@ -87,14 +86,13 @@ def hold(u: Array) -> Array:
     overflows nor underflows (4 and 1/2 only move the exponent; checked for all 2^23 float32
     values of :func:`open_unit`). XLA counts ``sqrt`` as expensive, so it computes the hash
     behind ``u`` once and stores it, instead of copying the integer-only threefry into every
-    fusion that reads ``u``, as XLA:CPU did (~6 hashes per lane and try in
+    fusion that reads ``u``, as XLA:CPU otherwise does (several hashes per lane and try in
     :mod:`sern_jax.engine.fast_thompson`). Plain ``sqrt(u·u)`` is simplified to ``|u|`` by XLA.
 
-    Applied on the CPU backend only (where it was measured and tested exact): on one H100
-    ``sqrt(4u·u)/2`` differs from ``u`` for 277,600 of the 2^23 uniforms (the GPU's ``sqrt``
-    is not correctly rounded; experiments/results/bench/gpu_sqrt_identity.txt), and with it
-    the fast Thompson runner's arms matched the general runner's on 0 % of seeds; elsewhere
-    ``u`` is returned as it is.
+    Applied on the CPU backend only, whose ``sqrt`` is correctly rounded and where the
+    identity is tested exact: a GPU's ``sqrt`` need not be correctly rounded, and there
+    ``sqrt(4u·u)/2`` differs from ``u`` for some uniforms and the fast Thompson runner's arms
+    would no longer match the general runner's; elsewhere ``u`` is returned as it is.
     """
     if jax.default_backend() != "cpu":
         return u
@@ -187,8 +185,7 @@ def beta_try_packed(k1: Array, k2: Array, a: Array, b: Array, try_index: Array,
     One output, held: XLA:CPU then compiles the whole try (hash, logs, exp, test) into one
     loop. With two outputs, or one that several consumers read, it does not duplicate the
     logs and exps into each consumer but materialises each of them, and every shared value
-    besides, as an array of its own (measured: ~15 passes over [C, K] per try instead of
-    one, 1.7x the time of a fast Thompson loop step on one core)."""
+    besides, as an array of its own (many passes over [C, K] per try instead of one)."""
     theta, accept = beta_try(k1, k2, a, b, try_index, lane)
     return hold(jnp.where(accept, theta, REJECTED))
 

@@ -87,8 +87,8 @@ def _problem(exp: RegretExperiment, dtype):
 
 _MAX_SEED = 2**32 - 1  # jax.random.key uses the seed modulo 2^32: larger ones would collide
 _MAX_DAYS = 7.0  # refuse runs estimated to take longer than this on this machine
-# Measured seed-rounds/s on the shared 2-core CPU (K = 10): the fast softmax runner and the
-# general runner (whose per-round cost grows with K); used only for the up-front estimate.
+# Seed-rounds per second at K = 10, calibrated on two CPU cores: the fast softmax runner and
+# the general runner (whose per-round cost grows with K); used only for the up-front estimate.
 _FAST_RATE = 3.0e6
 _GENERAL_RATE = 1.0e6
 

@@ -1,5 +1,5 @@
 """Checks every command makes before any work: one line naming the flag, exit 2, nothing
-written (the bad-input promise of README and DESIGN).
+written (the promise every command makes on bad input).
 
 * :class:`OneLineParser`: argparse's errors as one line ``sern ...: error: <message>`` (no
   usage block); ``--help`` is unchanged. Subparsers inherit the class, so every subcommand
@@ -13,8 +13,8 @@ written (the bad-input promise of README and DESIGN).
   an integer flag's argparse ``type`` with a floor (``--seeds abc``, ``--seeds -1``: one line
   ``... error: argument --seeds: ...``, exit 2, before anything is imported or compiled).
 * :func:`finite_float`: a float flag that must be finite and in range; ``float32_normal``
-  refuses values that float32 cannot hold as a normal number (``--alpha 1e-300`` became 0 in
-  float32, softmax returned NaN and SERN picked no grasp, with exit 0).
+  refuses values that float32 cannot hold as a normal number (``--alpha 1e-300`` is 0 in
+  float32, where softmax returns NaN and SERN would pick no grasp, with exit 0).
 * Typed argparse ``type`` parsers (argparse turns their error into one line naming the flag,
   exit 2, before anything is imported or compiled): :func:`int_in` (an integer in a range),
   :func:`float_in` (a finite float in a range), :func:`comma_list` / :func:`comma_list_of`

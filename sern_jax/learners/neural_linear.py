@@ -52,8 +52,8 @@ independent (Λ is block diagonal, so the arms' μ_g, Λ_g are unchanged and onl
 every arm's rows); a Thompson draw then takes one σ² for all arms. ``arm``: each arm's own
 σ² ~ IG(a_g, b_g), as the Showdown's ``NeuralLinearPosteriorSampling`` keeps ``a[i]``,
 ``b[i]`` per action (tensorflow/models research/deep_contextual_bandits). The default is
-pooled on evidence: on the wheel (20 seeds × T = 1000 per δ, docs/NEURAL.md) per-arm σ² cost
-0.044–0.089 of Uniform's regret at every δ (resolved after Holm at δ ≤ 0.95). With the
+pooled on evidence: on the wheel, per-arm σ² has the higher regret at every δ
+(docs/NEURAL.md). With the
 Showdown's IG(6, 6) prior on rewards scaled to [0, 1], an arm's σ² stays near the prior
 (mean 1.2) until it has many rows, where one pooled σ² has every arm's rows. With a shared β
 (plain features) there is one σ² either way.
@@ -67,7 +67,7 @@ network's own estimate, ``r = r̂_θ(x) + φ·β + ε`` with the same prior on �
 is the closed form above fitted to the residuals ``y − r̂_θ(x)`` and every score is
 ``r̂_θ(x) + φ·(...)``: with no data the learner acts on r̂, as every other learner does. (With
 a prior mean of 0, a posterior fitted on C alone throws θ0's knowledge away: on the grasp hard
-set it started ~7 points of greedy success below θ0's head.) ``zero``: the
+set it starts below θ0's greedy success.) ``zero``: the
 Showdown's β ~ N(0, σ²/λ I) on the raw rewards (the learner before this option).
 """
 
@@ -252,7 +252,7 @@ def fit_posterior(phi: Array, y: Array, w: Array, lambda_prior: Array, a0: Array
 def _lower_inverse(chol: Array) -> Array:
     """L⁻¹ of a lower-triangular [d, d] L by forward substitution, one row per step
     (row i = (e_i − Σ_{j<i} L_ij row_j) / L_ii). Matrix-vector steps: under vmap this is
-    several times faster on CPU than XLA's batched triangular solve with d right-hand
+    markedly faster on CPU than XLA's batched triangular solve with d right-hand
     sides."""
     d = chol.shape[-1]
     cols = jnp.arange(d)

@@ -346,7 +346,7 @@ def load(out_dir: str | Path) -> tuple[DatasetConfig, dict[str, np.ndarray]]:
         raise ValueError(
             f"{out_dir} was labelled in another simulated world (fingerprint {stored}, this "
             f"code's trial gives {config.fingerprint()}: the gripper or trial settings "
-            "changed, e.g. the 20 N default of 2026-11-24); regenerate it with `sern grasp "
+            "changed, e.g. the default finger force, 6 N -> 20 N); regenerate it with `sern grasp "
             "dataset --out NEW_DIR`")
     paths = shard_paths(out_dir, config)
     missing = [p.name for p in paths if not p.exists()]

@@ -402,7 +402,7 @@ def screen(network, params, specs, num_poses: int = 8, num_trials: int = 16, see
 
     The best candidate is chosen on the screening trials and valued on ``fresh_trials``
     new, independent trials (default: as many as ``num_trials``): the maximum of 64 noisy
-    frequencies is biased upward (64 candidates of true success 0.4 measured by 8 trials
+    frequencies is biased upward (64 candidates of true success 0.4 estimated from 8 trials
     each show a maximum of about 0.8). ``best_success`` keeps the biased maximum for
     comparison; the rule (:func:`is_hard`) uses ``best_success_fresh``. With
     ``rule="lcb"`` it uses instead ``best_success_lcb``, a simultaneous 95 % lower

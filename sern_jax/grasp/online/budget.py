@@ -9,12 +9,12 @@ the exceeded figure and the figure itself.
 
 The estimates are upper bounds from array shapes (what the code holds at once: images of
 H x W = 96 x 96 float32, K = 64 candidate slots, crops of 32 x 32 float32, one trial row per
-simulated grasp), not measurements; times use the rates measured on the project's 2-core
-machine (README: ~115 native trials/s and ~13 ms per resting pose and image per core), scaled
-by the cores this process may use. They only need to be right within a small factor: their job
-is to turn ``--eval-poses 1000000000`` into a refusal in milliseconds instead of a
-``RESOURCE_EXHAUSTED`` after 34 s, and ``--regret-trials 100000000`` into a refusal instead of
-a run that never ends.
+simulated grasp), not measurements; times use per-core rates calibrated from
+experiments/results/trial_rate and the commands' recorded run times, scaled by the cores this
+process may use. They only need to be right within a small factor: their job is to turn
+``--eval-poses 1000000000`` into a refusal in milliseconds instead of a
+``RESOURCE_EXHAUSTED`` after a long compile, and ``--regret-trials 100000000`` into a refusal
+instead of a run that never ends.
 """
 
 from __future__ import annotations
@@ -47,15 +47,15 @@ CROP_BYTES = 32 * 32 * 4  # one crop, float32
 SLOT_BYTES = 4 * 4 + 1 + 2 * 4 + 4 + 4 + 4 + 4 + 1  # grasp, valid, centre, angle, depth, ...
 CONTEXT_BYTES = IMAGE_BYTES + 7 * 8 + K * SLOT_BYTES  # one context as stored / held
 TRIAL_ROW_BYTES = 1024  # grasp, pose, noise, result and the simulator's per-trial state
-TRIALS_PER_CORE_S = 115.0  # native MuJoCo trials/s per core (README: 221-237 on 2 cores)
-CONTEXT_CORE_S = 0.013  # one resting pose + depth image + candidates (README profile)
+TRIALS_PER_CORE_S = 115.0  # native MuJoCo trials per second per core (calibrated)
+CONTEXT_CORE_S = 0.013  # core seconds per resting pose + depth image + candidates (calibrated)
 # The quality network is small (GQCNN-lite: ~10k parameters); a copy with Adam's two moments
 PARAM_COPY_BYTES = 3 * 4 * 20_000
 
 
 @dataclasses.dataclass(frozen=True)
 class Estimate:
-    """What a run will hold and do (upper bounds from shapes; rates measured, see module).
+    """What a run will hold and do (upper bounds from shapes; rates calibrated, see module).
 
     Attributes:
       memory_bytes: peak host memory.
@@ -125,7 +125,7 @@ def pretrain(*, grasps: int, epochs: int, batch_size: int, heldout_objects: int,
     trials = (heldout_objects * heldout_poses * K * heldout_trials
               + screen_objects * screen_poses * K * screen_trials)
     ctx = heldout_objects * heldout_poses + screen_objects * screen_poses
-    # training: ~1 s per epoch on 18k grasps on the 2-core machine (README)
+    # training: calibrated seconds per epoch of 18k grasps on two cores, scaled by the cores
     train_s = epochs * grasps / 18_000.0 * 2 / _cores()
     memory_parts = {"--data (D0's grasps)": data + dpp, "--batch-size": batch,
                     "--heldout-poses x --heldout-trials": heldout,
@@ -198,7 +198,8 @@ def learn(*, objects: int, policies: int, seeds: int, rounds: int, explore: int,
     contexts = o * s * (r * e + (r + 1) * evaluate + eval_poses)
     trial_parts["objects x --seeds x --eval-poses"] = o * s * eval_poses * (
         CONTEXT_CORE_S * TRIALS_PER_CORE_S)
-    # updates: ~31 s for the paper's 6 x 3 x 5 copies x 5 rounds x 40 steps (README)
+    # updates: calibrated seconds for the paper's 6 x 3 x 5 copies x 5 rounds x 40 steps on
+    # two cores, scaled by the copies, rounds, steps, batch size and cores
     update_s = r * o * s * q * fit_steps * batch_size * 31.0 / (6 * 3 * 5 * 5 * 40 * 32)
     return Estimate(
         # the checkpoint: results and per-grasp rewards (the states are replayed on resume)

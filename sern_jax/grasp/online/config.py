@@ -203,8 +203,8 @@ def _with_net(params: qn.QualityParams, net) -> qn.QualityParams:
 def copies_network(config: qn.QualityNetConfig) -> qn.QualityNetwork:
     """θ0's network as the learner computes it: the same function and parameters, with
     convolutions as im2col matmuls (``qn.make_quality_network(conv="im2col")``), which
-    run ~5x faster than XLA's convolution when vmapped over the O x S parameter copies on
-    CPU. The ask/tell loop uses it too, so both make the same choices."""
+    run markedly faster than XLA's convolution when vmapped over the O x S parameter copies
+    on CPU. The ask/tell loop uses it too, so both make the same choices."""
     return qn.make_quality_network(config, conv="im2col")
 
 
@@ -252,7 +252,7 @@ def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
     """What determines a run's results: the config, the objects (names and geometry, so
     the same mesh file at another scale is another run), θ0, and the default simulated
     world (``sim.physics_settings()``: a change of the default trial, e.g. 6 N -> 20 N
-    fingers on 2026-11-24, is another run; a non-default world, a subset of the seeds and
+    fingers, is another run; a non-default world, a subset of the seeds and
     learners from outside the registry are hashed on top by :func:`extend_fingerprint`)."""
     objects = [(s.name, repr(s)) for s in specs]
     text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(objects)

@@ -271,9 +271,8 @@ def lower_priority() -> None:
     of need call it, so on a many-core host (16 context threads) the cores go first to the
     threads the run waits on (the main thread's compiles and dispatch, the trial workers);
     idle cores still make contexts. On a few shared cores it is left off: there niceness
-    would hand the cores to other processes' work while the run waits for its contexts (on
-    the shared 2-core machine at load ~5, a run with it saved round 1 at 210 s against the
-    code before's 121 s; suspected, not isolated). Scheduling only: results are the same."""
+    would hand the cores to other processes' work while the run waits for its contexts.
+    Scheduling only: results are the same."""
     try:
         if not many_cores():
             return
@@ -329,7 +328,7 @@ _CAMERA_MODELS_LOCK = threading.Lock()
 
 def _camera_model(model: mujoco.MjModel):
     """``depth.camera_model(model)``, kept per model contents (the MJB bytes' digest, so an
-    edited model is another entry): ``mjx.put_model`` costs ~15 ms of Python per call, and
+    edited model is another entry): ``mjx.put_model`` is slow Python work on every call, and
     the online driver renders every (object, seed) batch of every round in one scene."""
     import hashlib
 

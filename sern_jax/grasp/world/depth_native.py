@@ -1,8 +1,8 @@
 """The depth camera on native MuJoCo: ``mj_multiRay`` on the CPU, no compile per object.
 
 ``depth.render`` (JAX/MJX) bakes each scene's geom types and convex-mesh planes into its
-compiled program, so every new object costs a compile (seconds on a CPU). Generating a data
-set over hundreds of objects on a CPU would spend most of its time compiling. This module
+compiled program, so every new object costs a compile. Generating a data set over hundreds
+of objects on a CPU would spend most of its time compiling. This module
 casts the same rays (``depth.pixel_rays``: one ray per pixel, planar depth) through MuJoCo's
 C ray caster instead, which needs no compile; it follows the same visibility rules (geom
 groups, excluded body, transparent geoms), so both give the same image (tests compare them).

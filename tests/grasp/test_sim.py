@@ -102,7 +102,8 @@ def test_mjx_result_does_not_depend_on_batch_neighbours(mjx_sim, paired_trials):
 
 def test_mjx_flags_nan(box_model, mjx_sim, paired_trials):
     grasps, noise = paired_trials
-    unstable = sim.GraspSimulator(_unstable(box_model), "mjx")  # same program, new model
+    unstable = sim.GraspSimulator(_unstable(box_model), "mjx",  # same program, new model
+                                  mjx_shape=None)
     res = unstable.run_trials(grasps, noise)
     assert res.nan.all() and not res.success.any()
 
@@ -124,7 +125,7 @@ def test_mjx_fixed_batch_runs_chunks_of_one_program(box_model, mjx_sim, paired_t
     grasps, noise = paired_trials
     MJX_BATCH = len(grasps)  # noqa: N806 (conftest's batch: the fixture's program)
     base = mjx_sim.run_trials(grasps, noise)
-    fixed = sim.GraspSimulator(box_model, "mjx", mjx_batch=MJX_BATCH)
+    fixed = sim.GraspSimulator(box_model, "mjx", mjx_batch=MJX_BATCH, mjx_shape=None)
     idx = np.concatenate([np.arange(MJX_BATCH), np.arange(5)])
     res = fixed.run_trials(grasps[idx], sim.TrialNoise(*(a[idx] for a in noise)))
     assert res.success.shape == (MJX_BATCH + 5,)

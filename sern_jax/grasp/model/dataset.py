@@ -65,6 +65,7 @@ __all__ = [
 
 CONTEXT_STREAM = 0
 TRIAL_STREAM = 1
+MJX_BATCH = 8192  # MJX trials per compiled call: one program for every object's trials
 _SHARD_KEYS = ("object_index", "pose", "depth", "grasps", "valid", "center_px",
                "angle_px", "grasp_depth", "label", "successes", "nan_count")
 
@@ -181,7 +182,7 @@ def label_contexts(
     first = np.full((num_p, num_k), -1, np.int8)
     pi, ki = np.nonzero(valid)
     if len(pi):
-        simulator = sim_lib.GraspSimulator(ctx.model, backend=backend)
+        simulator = sim_lib.GraspSimulator(ctx.model, backend=backend, mjx_batch=MJX_BATCH)
         n = len(pi)
         # trial j of context p uses the draw fold_in(key_trials, p * num_trials + j) for
         # every candidate of that context.

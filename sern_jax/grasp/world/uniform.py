@@ -74,9 +74,10 @@ __all__ = [
 
 INERT_SCALE = 0.01  # inert parts: the largest part shrunk to 1 % about its vertex mean
 MAX_FACE_VERTICES = 20  # MJX's most vertices per (merged coplanar) hull face
-# The farthest a point of an exact part lies outside its resampled hull, as a fraction of
-# that part's largest distance from its centre (the low-poly spheres and capsules of
-# ``objects.geom_points`` bound it; hulls of at most ``vertices`` vertices are exact).
+# The farthest a point of an exact part may lie outside its resampled hull, as a fraction
+# of that part's largest distance from its centre. Boxes and hulls of at most ``vertices``
+# vertices stay exact; round parts (spheres, capsules) and larger hulls lose their caps
+# between the kept vertices (tests/grasp/test_mjx_one_program.py checks the bound).
 RESAMPLE_TOLERANCE = 0.15
 
 
@@ -195,8 +196,8 @@ def hull_distance(points: np.ndarray, vertices: np.ndarray) -> float:
     return float(_point_triangle_distance(p[outside], hull.triangles).min(1).max())
 
 
-def _object_parts(model: mujoco.MjModel) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
-    """The object's compiled parts: (kind, size, pos, quat, local points) each."""
+def _object_parts(model: mujoco.MjModel) -> list[tuple]:
+    """The object's compiled parts: (kind, size, pos, quat, resample source points) each."""
     ids = scene_lib.scene_ids(model)
     parts = []
     for g in ids.object_geoms:

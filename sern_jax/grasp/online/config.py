@@ -38,7 +38,7 @@ __all__ = [
     "train_config",
 ]
 
-MJX_BATCH = 2048  # MJX trials per compiled call: one compile per object on a GPU
+MJX_BATCH = 2048  # MJX trials per compiled call: every call of a run has this one shape
 CHECKPOINT_VERSION = 5  # bump when the checkpoint's contents change (5: results + rewards,
 #                        learner states rebuilt by replaying the updates on resume)
 
@@ -191,14 +191,6 @@ class LearnerError(RuntimeError):
 # ----------------------------------------------------------------------------- learners
 
 
-def _net(params: qn.QualityParams):
-    return params.net
-
-
-def _with_net(params: qn.QualityParams, net) -> qn.QualityParams:
-    return qn.QualityParams(net, params.normalizer)
-
-
 @functools.lru_cache(maxsize=4)
 def copies_network(config: qn.QualityNetConfig) -> qn.QualityNetwork:
     """θ0's network as the learner computes it: the same function and parameters, with
@@ -210,10 +202,10 @@ def copies_network(config: qn.QualityNetConfig) -> qn.QualityNetwork:
 
 @functools.lru_cache(maxsize=4)
 def quality_model(network: qn.QualityNetwork) -> lbase.Model:
-    """The quality network as a learner's :class:`~sern_jax.learners.base.Model`: inputs
-    (crop image [..., S, S], grasp depth [...]); the input normaliser is not trained."""
-    return lbase.Model(network.init, network.apply, network.logits, network.features,
-                       trainable=_net, merge=_with_net)
+    """The quality network as a learner's :class:`~sern_jax.learners.base.Model`
+    (:func:`sern_jax.grasp.model.quality_net.learner_model`), one object per network so that
+    learners built on it are shared between runs in one process."""
+    return qn.learner_model(network)
 
 
 def _probe_network(params, x):

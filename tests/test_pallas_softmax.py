@@ -226,3 +226,25 @@ def test_bench_pallas_bad_input(argv, match, capsys):
     assert cli.main(["bench", "bandit", "--json", *argv]) == 2
     err = capsys.readouterr().err
     assert match in err and len(err.strip().splitlines()) == 1
+
+
+def test_run_seeds_takes_the_kernel_where_it_applies(monkeypatch):
+    """``runner="pallas"`` through the one seed driver (interpreter on the CPU) gives the fast
+    runner's outputs; ``auto`` takes the kernel only on a GPU, where it applies, where this
+    jax still lowers Pallas to Triton, and without a mesh."""
+    from sern_jax.engine import drive, plan
+
+    cfg, params = _setup(8, 60)
+    got = drive.run_seeds(cfg, params, num_seeds=40, runner="pallas", chunk_size=24)
+    fast = drive.run_seeds(cfg, params, num_seeds=40, runner="fast")
+    _assert_same(got, fast, cfg)
+    assert plan.plan_run(cfg, params, 40, runner="pallas").chunk % 16 == 0
+    assert plan.plan_run(cfg, params, 40).runner == ("pallas" if plan.pallas_by_default(
+        cfg, params) else "fast")
+    monkeypatch.setattr(plan.jax, "default_backend", lambda: "gpu")
+    assert plan.pallas_by_default(cfg, params)
+    assert not plan.pallas_by_default(*_setup(12, 60))  # K not a power of two
+    monkeypatch.setattr(ps, "available", lambda: False)  # a jax without the Triton lowering
+    assert not plan.pallas_by_default(cfg, params)
+    with pytest.raises(ValueError, match="runner='pallas' needs"):
+        plan.plan_run(dataclasses.replace(cfg, policy="greedy"), params, 8, runner="pallas")

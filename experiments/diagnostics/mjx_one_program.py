@@ -7,7 +7,7 @@ per object), all from the exact scene's resting pose, run
 * natively on the exact scene (the reference),
 * natively on the uniform scene (``uniform.uniform_scene``: the object as padded convex
   mesh parts with the exact inertia),
-* with MJX on the uniform scenes of all objects at once (``uniform.UniformBatch``: one
+* with MJX on the uniform scenes of all objects at once (``sim.UniformBatch``: one
   ``jit(vmap(vmap(execute)))`` program over objects x trials).
 
 Reports, per object and pooled: (a) native vs MJX agreement on the uniform scene, (b) exact vs
@@ -97,14 +97,14 @@ def main(argv=None) -> int:
     build_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    batch = uniform.UniformBatch(exact, trial, shape, trials=args.batch or args.trials)
+    batch = sim.UniformBatch(exact, trial, shape, trials=args.batch or args.trials)
     put_s = time.perf_counter() - t0
     stacked = sim.TrialNoise(*(np.stack([n[k] for n in noise]) for k in range(3)))
     t0 = time.perf_counter()
     mjx_res = batch.run_trials(grasps, stacked, poses)
     first_s = time.perf_counter() - t0
     rev = slice(None, None, -1)
-    batch_rev = uniform.UniformBatch(exact[rev], trial, shape, trials=args.batch or args.trials)
+    batch_rev = sim.UniformBatch(exact[rev], trial, shape, trials=args.batch or args.trials)
     t0 = time.perf_counter()
     again = batch_rev.run_trials(grasps[rev], sim.TrialNoise(*(a[rev] for a in stacked)),
                                  poses[rev])[::-1]

@@ -380,6 +380,7 @@ def _path_run_seeds(s: BanditSetup):
         lambda: executor.run_seeds(s.config, s.params, w.seed, w.seeds, mesh=s.mesh),
         w.repeats, warmup=0)
     entry = {"engine_path": "sern_jax.engine.drive.run_seeds", "fast": plan.fast,
+             "runner": plan.runner,
              "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
              "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
     return entry, t.result
@@ -401,6 +402,7 @@ def _path_run_seeds_summary(s: BanditSetup):
                                    summary=True), repeats, warmup=0)
     arrays = executor.summary_arrays(t.result)
     entry = {"engine_path": "sern_jax.engine.drive.run_seeds(summary=True)", "fast": plan.fast,
+             "runner": plan.runner,
              "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
              "summary_bytes": int(sum(a.nbytes for a in arrays.values())),
              "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}

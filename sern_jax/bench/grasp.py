@@ -125,7 +125,7 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
     """Trials/s of a batch of different objects per backend, and ``mjx_compiles``.
 
     Native: each object's ``GraspSimulator`` on ``threads``, one object after another. MJX:
-    ``uniform.UniformBatch``, one compiled ``jit(vmap(vmap(execute)))`` program over objects x
+    ``sim.UniformBatch``, one compiled ``jit(vmap(vmap(execute)))`` program over objects x
     trials on the objects' uniform models. ``mjx_compiles`` is the number of distinct compiled
     MJX trial programs after the batch ran in its order and in reverse (a new batch): 1 when
     one program serves every object. Object i: resting pose seed i, ``trials_per_object``
@@ -156,10 +156,10 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
               "success_rate": float(np.mean([r.success.mean() for r in tm.result]))}
     log(f"objects native: {native['trials_per_s']:9.1f} trials/s ({len(models)} objects)")
     t0 = time.perf_counter()
-    batch = uniform.UniformBatch(models, sim.TrialConfig(), trials=n)
+    batch = sim.UniformBatch(models, sim.TrialConfig(), trials=n)
     models_s = time.perf_counter() - t0
     tm = timing.time_calls(lambda: batch.run_trials(grasps, stacked), repeats, warmup=1)
-    reverse = uniform.UniformBatch(models[::-1], sim.TrialConfig(), batch.shape, trials=n)
+    reverse = sim.UniformBatch(models[::-1], sim.TrialConfig(), batch.shape, trials=n)
     reverse.run_trials(grasps[::-1], sim.TrialNoise(*(a[::-1] for a in stacked)))
     mjx = {"trials_per_s": total / tm.best_s, "seconds": tm.best_s, "first_call_s": tm.first_s,
            "compile_s": max(tm.first_s - tm.best_s, 0.0), "models_s": models_s,

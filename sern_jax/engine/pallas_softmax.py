@@ -40,13 +40,13 @@ In Pallas' interpreter (CPU) every output equals the engine's bit for bit (tests
 GPU ``sern bench bandit --pallas`` reports the fraction of seeds whose outputs equal the
 engine's.
 
-One device only: the kernel is not sharded (``sern bench bandit --pallas`` refuses
-``--devices`` > 1), and nothing public calls it: it is a bench-only path beside the engine.
-Use ``interpret=True`` off-GPU (tests); on a GPU the kernel compiles through Triton
-(``jax.experimental.pallas.triton.CompilerParams``; Mosaic GPU is JAX's default otherwise).
-Its rates beside the engine's are recorded in ``experiments/results/bench/`` (``sern bench
-bandit --pallas``). The Pallas Triton backend is deprecated in recent jax releases: this
-module then needs Mosaic GPU or jax_triton.
+One device only: the kernel is not sharded. ``drive.run_seeds`` takes it by default on one
+GPU wherever :func:`supports` holds (``plan.pallas_by_default``; ``runner="fast"`` keeps the
+XLA fast runner), and ``sern bench bandit --pallas`` times it beside the engine. Use
+``interpret=True`` off-GPU (tests); on a GPU the kernel compiles through Triton
+(``jax.experimental.pallas.triton.CompilerParams``). The Pallas Triton backend is deprecated
+in recent jax releases: where :func:`available` says it is gone, ``run_seeds`` keeps the fast
+runner, which draws the same arms.
 """
 
 from __future__ import annotations
@@ -78,6 +78,20 @@ DEFAULT_SEEDS_PER_PROGRAM = 16  # B: seeds one program instance owns (rows of it
 DEFAULT_NUM_WARPS = 4
 REBASE_MODES = ("tiled16", "scan", "sequential")
 MAX_ARMS = 256  # 16 tiles of 16: the K up to which _tiled_prefix_sums is XLA's cumsum order
+
+
+SUPPORTS_TEXT = ("SERN softmax with one context, a local estimator, no diagnostics, float32 "
+                 f"and K a power of two in [2, {MAX_ARMS}]")
+
+
+def available() -> bool:
+    """Whether this jax lowers Pallas kernels to Triton (``jax.experimental.pallas.triton``).
+    Where it does not, ``run_seeds`` keeps the fast runner on a GPU, whose arms are the same."""
+    try:
+        from jax.experimental.pallas import triton  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def supports(config: sim.RunConfig, params: sim.RunParams | None = None) -> bool:

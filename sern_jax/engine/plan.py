@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sern_jax.core import estimators as est_lib
-from sern_jax.engine import fast_softmax, fast_thompson
+from sern_jax.engine import fast_softmax, fast_thompson, pallas_softmax
 from sern_jax.engine import simulate as sim
 from sern_jax.engine import summary as summary_lib
 from sern_jax.engine.simulate import Diagnostics, RunConfig, RunParams
@@ -45,7 +45,7 @@ __all__ = [
     "use_pinned_host",
 ]
 
-RUNNERS = ("auto", "fast", "general")
+RUNNERS = ("auto", "fast", "general", "pallas")
 # Bytes of outputs and per-seed state one jitted call may hold on the host backend: seeds run in
 # calls of this size (one compilation), results are written into preallocated arrays, so peak
 # memory is the final O(S·G·K) outputs plus one call's worth, whatever S is.
@@ -63,7 +63,8 @@ class RunPlan:
         reducing over its first ``num_valid`` seeds on the device
         (:func:`sern_jax.engine.summary.summarize_outputs`).
       args: the arguments after the keys that every call takes (the traced parameters), or ().
-      runner: ``"fast"`` (fast_softmax), ``"thompson"`` (fast_thompson), ``"general"``
+      runner: ``"fast"`` (fast_softmax), ``"thompson"`` (fast_thompson), ``"pallas"`` (the
+        fused GPU kernel, :mod:`sern_jax.engine.pallas_softmax`), ``"general"``
         (``vmap(simulate.make_run)``) or ``"neural"`` (``vmap(neural.make_run)``).
       num_seeds: S, the seeds of the batch.
       first_seed: index of the first seed (seed i of the batch is ``first_seed + i``).
@@ -97,8 +98,9 @@ class RunPlan:
 
     @property
     def fast(self) -> bool:
-        """Whether ``fn`` is one of the fast tabular runners (fast_softmax, fast_thompson)."""
-        return self.runner in ("fast", "thompson")
+        """Whether ``fn`` is one of the fast tabular runners (fast_softmax, fast_thompson, or
+        the fused kernel, which draws fast_softmax's arms)."""
+        return self.runner in ("fast", "thompson", "pallas")
 
     @property
     def starts(self) -> range:
@@ -191,10 +193,31 @@ def _check_first_seed(first_seed, num_seeds: int) -> int:
 # ----------------------------------------------------------------------------- tabular plans
 
 
-def _choose_runner(config: RunConfig, params: RunParams, runner: str) -> str:
-    """``"fast"``, ``"thompson"`` or ``"general"`` for a validated config (see plan_run)."""
+def pallas_by_default(config: RunConfig, params: RunParams,
+                      mesh: "jax.sharding.Mesh | None" = None) -> bool:
+    """Whether ``runner="auto"`` takes the fused kernel: on one GPU (no mesh), for the
+    configurations where it draws the fast runner's arms (``pallas_softmax.supports``), and
+    where this jax still lowers Pallas to Triton (``pallas_softmax.available``)."""
+    return (mesh is None and jax.default_backend() == "gpu"
+            and pallas_softmax.supports(config, params) and pallas_softmax.available())
+
+
+def _choose_runner(config: RunConfig, params: RunParams, runner: str,
+                   mesh: "jax.sharding.Mesh | None" = None) -> str:
+    """``"fast"``, ``"thompson"``, ``"pallas"`` or ``"general"`` for a validated config (see
+    plan_run)."""
     if runner == "general":
         return "general"
+    if runner == "pallas":
+        if mesh is not None or not pallas_softmax.supports(config, params):
+            raise ValueError(
+                f"runner='pallas' needs one device (no mesh) and what the fused kernel "
+                f"reproduces: {pallas_softmax.SUPPORTS_TEXT}; got policy={config.policy!r}, "
+                f"estimator={config.estimator!r}, num_arms={config.num_arms}, "
+                f"dtype={config.dtype!r}")
+        return "pallas"
+    if runner == "auto" and pallas_by_default(config, params, mesh):
+        return "pallas"
     # fast_thompson draws the same arms as the general runner (tested) and is faster on
     # every backend, so "auto" takes it wherever it applies
     if fast_thompson.supports(config, validated=True):
@@ -226,12 +249,16 @@ def plan_run(
     """The plan of a tabular ``run_seeds`` call (host-side; compiles nothing).
 
     Validates ``config``, ``params``, the seeds and the options once. ``runner="auto"``
-    takes :mod:`sern_jax.engine.fast_softmax` whenever it reproduces ``simulate.make_run``
+    takes the fused kernel on one GPU where it applies (:func:`pallas_by_default`: the same
+    arms, counts, regret, compensator and min π as fast_softmax; the Rao–Blackwellised regret
+    may differ in its last bits), else
+    :mod:`sern_jax.engine.fast_softmax` whenever it reproduces ``simulate.make_run``
     (SERN softmax, one context, a local estimator, no diagnostics, α large enough for its
     float type; see ``fast_softmax.supports``), :mod:`sern_jax.engine.fast_thompson` for
     Thompson sampling with one context and no diagnostics, and the general runner otherwise;
     ``"fast"`` insists on a fast runner (``ValueError`` if unsupported), ``"general"`` on
-    ``simulate.make_run``. ``summary``: the plan's ``fn`` reduces over seeds on the device.
+    ``simulate.make_run``, ``"pallas"`` on the fused kernel (off a GPU in Pallas'
+    interpreter: slow, for tests). ``summary``: the plan's ``fn`` reduces over seeds on the device.
     Arguments as in :func:`sern_jax.engine.drive.run_seeds`.
     """
     sim.validate(config, params, num_seeds)
@@ -241,14 +268,17 @@ def plan_run(
     if chunk_size is not None and (isinstance(chunk_size, bool) or int(chunk_size) < 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     grid = sim.checkpoint_times(config)
-    kind = _choose_runner(config, params, runner)
+    kind = _choose_runner(config, params, runner, mesh)
     fast = kind != "general"
     workers = concurrent_calls(mesh)
     chunk = (default_chunk_size(config, num_seeds, workers=workers, summary=summary,
                                 num_checkpoints=grid.size)
              if chunk_size is None else int(chunk_size))
     n_dev = 1 if mesh is None else mesh.devices.size
-    if fast:
+    if kind == "pallas":  # whole programs of seeds: no padding inside the kernel's calls
+        inner = None
+        chunk = pallas_softmax.pad_seeds(chunk, pallas_softmax.DEFAULT_SEEDS_PER_PROGRAM)
+    elif fast:
         target = fast_softmax.DEFAULT_CPU_CHUNK if jax.default_backend() == "cpu" else None
         inner, chunk = fast_softmax.chunk_layout(chunk, target, n_dev)
         if inner * n_dev >= chunk:
@@ -258,7 +288,8 @@ def plan_run(
         chunk = int(math.ceil(chunk / n_dev) * n_dev)
     workers = max(1, min(workers, -(-num_seeds // chunk)))
     edges = summary_lib.summary_edges(config, grid) if summary else None
-    fn = batched_runner(config, mesh, fast, inner, summary=summary, edges=edges)
+    fn = batched_runner(config, mesh, fast, inner, summary=summary, edges=edges,
+                        pallas=kind == "pallas")
     return RunPlan(fn=fn, args=(params,), runner=kind, num_seeds=int(num_seeds),
                    first_seed=first_seed, chunk=chunk, inner=inner, workers=workers,
                    summary=summary, mesh=mesh, pinned=use_pinned_host(mesh), overlap=True,
@@ -270,7 +301,8 @@ _RUNNER_CACHE: dict = {}
 
 def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
                    fast: bool = False, inner: int | None = None,
-                   summary: bool = False, edges: dict | None = None) -> Callable:
+                   summary: bool = False, edges: dict | None = None,
+                   pallas: bool = False) -> Callable:
     """The jitted batched runner ``fn(keys [S'], params) -> RunOutput`` of a tabular plan,
     cached per (config, mesh, fast, inner, summary): one compilation per call shape.
 
@@ -285,10 +317,12 @@ def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
         outputs over the first ``num_valid`` seeds on the device
         (:func:`sern_jax.engine.summary.summarize_outputs`).
       edges: the summary's ``summary_edges(config)`` where the caller has them already.
+      pallas: the fused kernel (:func:`sern_jax.engine.pallas_softmax.make_pallas_run`; in
+        Pallas' interpreter off a GPU) instead of the fast runner.
     """
     mesh_key = None if mesh is None else (tuple(mesh.axis_names), mesh.devices.shape,
                                           tuple(d.id for d in mesh.devices.flat))
-    cache_key = (config, mesh_key, fast, inner, summary)
+    cache_key = (config, mesh_key, fast, inner, summary, pallas)
     if cache_key in _RUNNER_CACHE:
         return _RUNNER_CACHE[cache_key]
     if summary and edges is None:
@@ -296,12 +330,15 @@ def batched_runner(config: RunConfig, mesh: "jax.sharding.Mesh | None" = None,
     if summary and mesh is None:
         # Two compiled calls, the engine's (shared with the per-seed path) and the
         # reduction's, not one fused program: fused, XLA:GPU ran the engine itself slower.
-        engine = batched_runner(config, None, fast, inner)
+        engine = batched_runner(config, None, fast, inner, pallas=pallas)
         reduce = jax.jit(lambda out, num_valid: summary_lib.summarize_outputs(
             out, num_valid, edges))
         fn = _EngineThenSummary(engine, reduce)
     else:
-        if fast and config.policy == "thompson":
+        if pallas:
+            batched = pallas_softmax.make_pallas_run(
+                config, interpret=jax.default_backend() != "gpu")
+        elif fast and config.policy == "thompson":
             batched = fast_thompson.make_batched(config, chunk=inner, mesh=mesh)
         elif fast:
             batched = fast_softmax.make_batched(config, chunk=inner, mesh=mesh)

@@ -316,6 +316,16 @@ def _load_range(saved, start: int, stop: int) -> dict[str, np.ndarray]:
     return out
 
 
+def _runners(exp: RegretExperiment, triples, mesh) -> dict[str, str]:
+    """The engine each policy ran on this host (``drive.plan_run``'s choice: ``fast``,
+    ``thompson``, ``pallas`` or ``general``), recorded beside the results."""
+    from sern_jax.engine import plan
+
+    with _x64(exp):
+        return {policy: plan.plan_run(cfg, params, exp.num_seeds, mesh=mesh).runner
+                for policy, cfg, params in triples}
+
+
 def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool = True,
                    log=print, ray=None) -> Path:
     """Runs (or resumes) the experiment into ``out_dir``; returns the run directory.
@@ -463,7 +473,8 @@ def _run(exp, triples, run_dir: Path, mesh, progress: bool, log=print, ray=None)
     merged["t"] = sim.checkpoint_times(triples[0][1])
     merged["means"] = np.asarray(triples[0][2].problem.means)
     io.save_npz(run_dir / "results.npz", **merged)
-    meta = io.run_metadata(wall_seconds_per_policy=timings)
+    meta = io.run_metadata(wall_seconds_per_policy=timings,
+                           runner_per_policy=_runners(exp, triples, mesh))
     io.save_json(run_dir / "metadata.json", meta)
     summary = summarise(exp, merged)
     io.save_json(run_dir / "summary.json", summary)
@@ -513,7 +524,8 @@ def _run_summaries(exp, triples, run_dir: Path, mesh, progress: bool, ranges,
     merged["t"] = sim.checkpoint_times(triples[0][1])
     merged["means"] = np.asarray(triples[0][2].problem.means)
     io.save_npz(run_dir / "results.npz", **merged)
-    meta = io.run_metadata(wall_seconds_per_policy=timings)
+    meta = io.run_metadata(wall_seconds_per_policy=timings,
+                           runner_per_policy=_runners(exp, triples, mesh))
     io.save_json(run_dir / "metadata.json", meta)
     summary = summarise_summaries(exp, summaries, merged["t"])
     io.save_json(run_dir / "summary.json", summary)

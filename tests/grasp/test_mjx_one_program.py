@@ -36,7 +36,7 @@ def trials(exact):
 
 @pytest.fixture(scope="module")
 def batch(exact):
-    return uniform.UniformBatch(exact, SHORT, SHAPE, trials=TRIALS)
+    return sim.UniformBatch(exact, SHORT, SHAPE, trials=TRIALS)
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,7 @@ def _rows(noise, idx):
 
 def test_one_compiled_program_serves_different_objects(exact, batch, batch_results, trials):
     grasps, noise = trials
-    swapped = uniform.UniformBatch(exact[::-1], SHORT, SHAPE, trials=TRIALS)
+    swapped = sim.UniformBatch(exact[::-1], SHORT, SHAPE, trials=TRIALS)
     again = swapped.run_trials(grasps[::-1], _rows(noise, slice(None, None, -1)))
     assert swapped.program is batch.program
     assert batch.compiles == 1 and swapped.compiles == 1
@@ -64,7 +64,7 @@ def test_batched_over_objects_equals_each_object_alone(exact, batch, batch_resul
     itself twice (the same compiled program, the same uniform model)."""
     grasps, noise = trials
     for i, model in enumerate(exact):
-        alone = uniform.UniformBatch([model, model], SHORT, SHAPE, trials=TRIALS)
+        alone = sim.UniformBatch([model, model], SHORT, SHAPE, trials=TRIALS)
         out = alone.run_trials(grasps[[i, i]], _rows(noise, [i, i]))
         for res in out:
             np.testing.assert_array_equal(res.success, batch_results[i].success)
@@ -108,7 +108,7 @@ def test_full_trials_agree_native_and_mjx_on_uniform_models():
     """The default trial, 8 paired trials on each of two objects: native and MJX agree on
     at least 14 of 16 outcomes (the documented pooled agreement is about 95 %)."""
     models = [scene.build_scene(objects.make_object(n), seed=0) for n in NAMES]
-    b = uniform.UniformBatch(models, sim.TrialConfig(), trials=8)
+    b = sim.UniformBatch(models, sim.TrialConfig(), trials=8)
     rng = np.random.default_rng(0)
     grasps = np.stack([scene.centred_grasp(m) + np.c_[rng.uniform(-0.01, 0.01, (8, 3)),
                                                        rng.uniform(-0.5, 0.5, 8)]
@@ -195,3 +195,12 @@ def test_objects_with_too_many_parts_are_refused(exact):
     assert uniform.shape_for(exact[0]).parts == 4
     with pytest.raises(ValueError, match="vertices"):
         uniform.UniformShape(vertices=4)
+
+
+def test_bench_objects_flag_refuses_unknown_or_repeated_objects():
+    from sern_jax.commands import bench_grasp
+
+    with pytest.raises(ValueError, match="--objects: unknown object 'no_such_object'"):
+        bench_grasp.main(["grasp", "--objects", "small_box,no_such_object"])
+    with pytest.raises(ValueError, match="--objects must be distinct"):
+        bench_grasp.main(["grasp", "--objects", "small_box,small_box"])

@@ -70,3 +70,26 @@ def test_bad_inputs_raise():
     model = scene.build_scene(objects.make_object("cube"))
     with pytest.raises(ValueError, match="pose"):
         scene.set_object_pose(model, [0, 0, np.nan, 1, 0, 0, 0])
+
+
+def test_scene_config_reads_back_the_build_settings():
+    config = scene.SceneConfig(timestep=0.004, iterations=7, ls_iterations=9, impratio=5.0,
+                               opening=0.07, finger_force=12.5, finger_kp=900.0,
+                               finger_damping=15.0, palm_kp=3000.0, palm_damping=150.0,
+                               yaw_kp=40.0, yaw_damping=4.0, friction=0.7, pad_friction=0.4)
+    model = mujoco.MjModel.from_xml_string(
+        scene.scene_xml(objects.make_object("small_box"), config))
+    assert scene.scene_config(model) == config
+    assert scene.scene_config(scene.build_scene(objects.make_object("sphere"))) == \
+        scene.SceneConfig()
+
+
+def test_scene_xml_inertial_overrides_the_geoms_inertia():
+    spec = objects.make_object("small_box")
+    inertial = ((0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0), 0.25, (1e-4, 2e-4, 3e-4))
+    assert scene.scene_xml(spec) == scene.scene_xml(spec, inertial=None)
+    model = mujoco.MjModel.from_xml_string(scene.scene_xml(spec, inertial=inertial))
+    body = scene.scene_ids(model).object_body
+    np.testing.assert_allclose(model.body_ipos[body], inertial[0])
+    assert model.body_mass[body] == 0.25
+    np.testing.assert_allclose(model.body_inertia[body], inertial[3])

@@ -53,7 +53,6 @@ import numpy as np
 
 from sern_jax.grasp.world import objects as objects_lib
 from sern_jax.grasp.world import scene as scene_lib
-from sern_jax.grasp.world import sim as sim_lib
 
 __all__ = [
     "INERT_SCALE",
@@ -69,7 +68,6 @@ __all__ = [
     "resample_distances",
     "put_uniform",
     "stack_models",
-    "UniformBatch",
 ]
 
 INERT_SCALE = 0.01  # inert parts: the largest part shrunk to 1 % about its vertex mean
@@ -493,97 +491,3 @@ def stack_models(models):
         if [np.shape(x) for x in jax.tree_util.tree_leaves(m)] != shapes:
             raise ValueError(f"model {i} has other array shapes than model 0")
     return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *models)
-
-
-# ----------------------------------------------------------------------------- batches
-
-
-@functools.lru_cache(maxsize=8)
-def _objects_program(execute):
-    """jit(vmap over objects (model, poses, grasps, params) of vmap over trials)."""
-    per_object = jax.vmap(execute, in_axes=(None, 0, 0, 0))
-    return jax.jit(jax.vmap(per_object, in_axes=(0, 0, 0, 0)))
-
-
-class UniformBatch:
-    """MJX trials of several objects in one compiled program: ``jit(vmap(vmap(execute)))``
-    over objects x trials, on the stacked uniform models of the objects' scenes.
-
-    Args:
-      models: exact grasp scenes (``scene.build_scene``), one per object, all built with
-        the same ``SceneConfig``.
-      config: the trial.
-      shape: the uniform structure (None: ``shape_for`` of the object with most parts).
-      trials: trials per object per compiled call (calls are padded to it, so every call
-        runs the one program).
-
-    Attributes:
-      uniform: the uniform ``MjModel`` of each object (native MuJoCo runs them too).
-      mx: the stacked ``mjx.Model`` [O, ...].
-      compiles: distinct compiled trial programs so far (``_cache_size`` of the jitted
-        program, which is shared by every UniformBatch of the same structure).
-    """
-
-    def __init__(self, models, config: sim_lib.TrialConfig = sim_lib.TrialConfig(),
-                 shape: UniformShape | None = None, trials: int = 64):
-        models = list(models)
-        if not models:
-            raise ValueError("UniformBatch needs at least one model")
-        if shape is None:
-            shape = max((shape_for(m) for m in models), key=lambda s: s.parts)
-        if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
-            raise ValueError(f"trials must be an int >= 1, got {trials!r}")
-        self.config, self.shape, self.trials = config, shape, trials
-        self.uniform = [uniform_scene(m, shape) for m in models]
-        self.mx = stack_models([put_uniform(m, shape) for m in self.uniform])
-        self.program = _objects_program(sim_lib.make_execute(config, self.uniform[0]))
-        self.pose0 = np.stack([scene_lib.object_pose(m) for m in self.uniform])
-
-    @property
-    def compiles(self) -> int:
-        return int(self.program._cache_size())
-
-    def run_trials(self, grasps, noise: sim_lib.TrialNoise, object_pose=None):
-        """Runs N trials on each of the O objects.
-
-        Args:
-          grasps: [O, N, 4] commanded grasps.
-          noise: TrialNoise of [O, N], [O, N], [O, N, 4].
-          object_pose: optional [O, N, 7] (or [O, 7]) start poses (default: each uniform
-            scene's ``qpos0`` pose).
-
-        Returns:
-          list of O ``TrialResult`` (backend ``"mjx"``), decided as ``GraspSimulator``
-          decides them.
-        """
-        o = len(self.uniform)
-        g = sim_lib.check_grasps(grasps)
-        if g.ndim != 3 or g.shape[0] != o:
-            raise ValueError(f"grasps must have shape [{o}, N, 4], got {g.shape}")
-        n = g.shape[1]
-        for i in range(o):
-            sim_lib._check_noise(sim_lib.TrialNoise(*(a[i] for a in noise)), n)
-        if object_pose is None:
-            poses = np.broadcast_to(self.pose0[:, None], (o, n, 7))
-        else:
-            p = np.asarray(object_pose, np.float64)
-            poses = np.broadcast_to(p[:, None] if p.ndim == 2 else p, (o, n, 7))
-        size = self.trials
-        n_pad = -(-max(n, 1) // size) * size
-        pad = np.concatenate([np.arange(n), np.zeros(n_pad - n, np.int64)])
-        f32 = functools.partial(jnp.asarray, dtype=jnp.float32)
-        finite, rise, gap = [], [], []
-        for lo in range(0, n_pad, size):
-            idx = pad[lo:lo + size]
-            params = sim_lib.TrialNoise(*(f32(np.asarray(a)[:, idx]) for a in noise))
-            with jax.numpy_rank_promotion("allow"):
-                out = self.program(self.mx, f32(poses[:, idx]), f32(g[:, idx]), params)
-            finite.append(np.asarray(out.finite))
-            rise.append(np.asarray(out.rise, np.float64))
-            gap.append(np.asarray(out.gap, np.float64))
-        nan = ~np.concatenate(finite, 1)[:, :n]
-        rise = np.where(nan, np.nan, np.concatenate(rise, 1)[:, :n])
-        gap = np.concatenate(gap, 1)[:, :n]
-        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
-        return [sim_lib.TrialResult(success[i], nan[i], rise[i], gap[i], "mjx")
-                for i in range(o)]

@@ -137,7 +137,6 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
     from sern_jax.grasp.world import objects as objects_lib
     from sern_jax.grasp.world import scene as scene_lib
     from sern_jax.grasp.world import sim
-    from sern_jax.grasp.world import uniform
 
     log = log or (lambda msg: None)
     specs = [objects_lib.resolve_object(o) for o in objects]

@@ -1330,6 +1330,48 @@ def performance_bandit() -> str:
     return table(["workload", "path", "seeds", "seed-rounds/s", "hardware", "record"], rows)
 
 
+@block("performance-gpu-public-path")
+def performance_gpu_public_path() -> str:
+    """``run_seeds`` on one GPU with the fused kernel, beside the code before the layout move
+    and the plain ``jit(vmap(scan))`` bandit of each run."""
+    rows = []
+    folder = RESULTS / "gpu_public_path"
+    for code, what in (("6959a83", "fused kernel by default"),
+                       ("b762d0d", "before: the XLA fast runner")):
+        path = folder / f"bench_bandit_{code}.json"
+        d = _json(path)
+        w = d["workload"]
+        naive = d["naive_jax"]["seed_rounds_per_s"]
+        for key, name in (("run_seeds_summary", "`run_seeds(summary=True)`"),
+                          ("run_seeds", "`run_seeds`, per-seed arrays")):
+            r = d[key]["seed_rounds_per_s"]
+            rows.append([f"{code} ({what})", name, f"{w['seeds']:,}", f"{r / 1e9:.2f} G",
+                         f"{r / naive:.2f}×", "one NVIDIA H200", link(path)])
+    return table(["code", "path", "seeds", "seed-rounds/s", "over plain jit(vmap(scan)), "
+                  "same run", "hardware", "record"], rows)
+
+
+@block("performance-mjx-one-program")
+def performance_mjx_one_program() -> str:
+    """Per-object MJX programs against the one uniform program, same objects and trials."""
+    path = RESULTS / "mjx_one_program" / "program_pair_h200.json"
+    d = _json(path)
+    rows = []
+    for shape, name in (("None", "one program per object"), ("auto", "one program for all")):
+        for r in d[shape]:
+            rows.append([name, r["object"], f"{d['trials']:,}", f"{r['first_s']:.0f} s",
+                         f"{r['trials_per_s']:,.0f}", "one NVIDIA H200", link(path)])
+    agree = _json(RESULTS / "mjx_one_program" / "agreement_h200.json")["pooled"]
+    a, b = agree["native_vs_mjx_uniform"], agree["exact_vs_uniform_native"]
+    return (table(["MJX program", "object", "trials per call", "first call (compile)",
+                   "trials/s", "hardware", "record"], rows) +
+            f"\n\nOn ten objects × 256 paired trials, native MuJoCo and MJX on the uniform "
+            f"models agree on {pct(a['agreement'])} of trials (95 % Clopper–Pearson "
+            f"[{100 * a['ci95'][0]:.1f}, {100 * a['ci95'][1]:.1f}] %), and the uniform shapes against the exact meshes, both on "
+            f"the native backend, on {pct(b['agreement'])} "
+            f"({link(RESULTS / 'mjx_one_program' / 'agreement_h200.json')}).")
+
+
 @block("performance-commands")
 def performance_commands() -> str:
     rows = []

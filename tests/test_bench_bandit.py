@@ -33,7 +33,7 @@ def test_bench_bandit_json(capsys):
     assert result[result["best_path"]]["seed_rounds_per_s"] == result["seed_rounds_per_s"]
     # different streams (NumPy vs JAX), same workload: means agree within a few SE
     assert abs(agree["z_fast_vs_numpy"]) < 6
-    # issue 20: the public path with on-device summaries and the naive jit(vmap(scan)) peer
+    # the public path with on-device summaries and the naive jit(vmap(scan)) peer
     for field in ("naive_jax_seed_rounds_per_s", "run_seeds_summary_seed_rounds_per_s",
                   "public_over_fast", "public_over_naive_jax"):
         assert isinstance(result[field], (int, float)) and result[field] > 0, field

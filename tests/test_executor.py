@@ -204,7 +204,7 @@ def test_memory_does_not_grow_with_horizon_small():
 
 @pytest.mark.slow
 def test_memory_full_size():
-    # The issue's size: S = 10,000, T = 100,000, K = 64 (10^9 seed-rounds; minutes on 2 cores).
+    # A large size: S = 10,000, T = 100,000, K = 64 (10^9 seed-rounds; minutes on 2 cores).
     assert _peak_rss_mb(100_000) < 2048
 
 
@@ -299,7 +299,7 @@ def test_package_loads_its_layers_lazily():
 
 def test_summary_integer_paths_equal_the_float_paths():
     # The counts histogram looks bins up in a table and the counts mean comes from exact int32
-    # partial sums (issue 20, faster on the H100); both must equal the float paths they
+    # partial sums; both must equal the float paths they
     # replace: the table equals _bin_index on every integer 0..T, and the block sums (forced
     # small here, with padding and masked seeds) equal the compensated float sum.
     config = sim.RunConfig(policy="softmax", estimator="addhalf", num_arms=4, horizon=3000)

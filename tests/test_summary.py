@@ -1,4 +1,4 @@
-"""On-device summaries over seeds (issue 20): ``run_seeds(..., summary=True)`` equals the NumPy
+"""On-device summaries over seeds: ``run_seeds(..., summary=True)`` equals the NumPy
 reduction of the per-seed arrays, chunks merge exactly, and a seed's contribution does not
 depend on how many seeds ran beside it or how they were chunked."""
 

@@ -7,7 +7,7 @@ it directly::
     result = benchmarks.bandit_benchmark(benchmarks.BanditWorkload(horizon=1_000, seeds=512))
     result["speedup_vs_numpy"], result["machine"]
 
-Workload (issue 2): SERN softmax(r̂/α) with the add-half estimator, K Bernoulli arms with
+Workload: SERN softmax(r̂/α) with the add-half estimator, K Bernoulli arms with
 means U[0, 1] drawn per seed, constant α, T rounds, S seeds; every round samples one arm by
 inverse CDF with one uniform, draws the reward, updates r̂, and accumulates the outputs of
 ``simulate.RunOutput`` (realised and Rao–Blackwellised regret, compensator Σπ, min π, counts)
@@ -32,7 +32,7 @@ the shared :class:`BanditSetup`; a new way is one more such function and one mor
 * ``naive_jax``: :func:`naive_jax_bandit`, the ~40-line ``jit(vmap(scan))`` bandit a JAX
   user writes first (softmax recomputed every round, ``jax.random`` keys per round, plain
   float32 sums, final regret and counts only), the peer the engine must beat.
-* ``pallas`` (``pallas=True``, issue 20 stretch): :mod:`sern_jax.engine.pallas_softmax`, the fused
+* ``pallas`` (``pallas=True``): :mod:`sern_jax.engine.pallas_softmax`, the fused
   kernel that keeps each seed's state on chip across rounds, on the fast path's keys; its
   outputs are compared with the fast path's seed by seed (``regret_agreement``).
 
@@ -471,7 +471,7 @@ def _path_smpybandits(s: BanditSetup):
 
 
 def _path_pallas(s: BanditSetup):
-    """The fused kernel (issue 20 stretch) on the fast path's keys: its outputs are compared
+    """The fused kernel on the fast path's keys: its outputs are compared
     with the fast engine's seed by seed. Triton on a GPU, Pallas' interpreter elsewhere."""
     import jax
 
@@ -598,7 +598,7 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         "speedup_vs_numpy": best_rate / numpy_rate if numpy_rate else None,
         "general_speedup_vs_numpy": (general_rate / numpy_rate
                                      if numpy_rate and general_rate else None),
-        # issue 20: the public path with on-device summaries against the engine and the
+        # the public path with on-device summaries against the engine and the
         # naive jit(vmap(scan)) peer measured in this process
         "run_seeds_summary_seed_rounds_per_s": rates.get("run_seeds_summary"),
         "naive_jax_seed_rounds_per_s": (result["naive_jax"]["seed_rounds_per_s"]
@@ -610,7 +610,7 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
                                   if "run_seeds_summary" in rates and "naive_jax" in result
                                   else None),
         "fast_speedup_vs_numpy": rates["fast"] / numpy_rate if numpy_rate else None,
-        # issue 20 (Thompson): SMPyBandits' Thompson on the same instance (--smpybandits-seeds)
+        # Thompson: SMPyBandits' Thompson on the same instance (--smpybandits-seeds)
         "smpybandits_seed_rounds_per_s": (result["smpybandits"]["seed_rounds_per_s"]
                                           if "smpybandits" in result else None),
         "speedup_vs_smpybandits": (best_rate / result["smpybandits"]["seed_rounds_per_s"]
@@ -626,7 +626,7 @@ def bandit_benchmark(w: BanditWorkload = BanditWorkload()) -> dict[str, Any]:
         "jax_version": jax.__version__,
         "jax_threefry_partitionable": bool(jax.config.jax_threefry_partitionable),
     })
-    # issue 20 stretch: the fused Pallas kernel beside the engine's fast path (--pallas)
+    # the fused Pallas kernel beside the engine's fast path (--pallas)
     result["pallas_seed_rounds_per_s"] = (result["pallas"]["seed_rounds_per_s"]
                                           if "pallas" in result else None)
     result["pallas_over_fast"] = (result["pallas"]["seed_rounds_per_s"] / rates["fast"]

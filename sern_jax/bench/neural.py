@@ -1,6 +1,6 @@
 """Throughput of the neural runner, beside a per-seed Python loop over the same JAX functions.
 
-Workload (issue 19): the wheel bandit (δ = 0.95 by default), one learner of the registry
+Workload: the wheel bandit (δ = 0.95 by default), one learner of the registry
 (Neural-Linear Thompson by default) on the MLP of :mod:`sern_jax.engine.networks`, updates every
 ``update_every`` rounds, S seeds × T rounds. Two ways of running it, in one process:
 

@@ -13,7 +13,7 @@ Why it is faster than the general runner (0.039M seed-rounds/s at K = 64 on 2 co
   never rejected, when a posterior parameter is 1 or 2; Cheng's BB otherwise) one try per
   lane and loop step instead of
   ``jax.random.beta``'s per-element ``while_loop`` that every lane waits in;
-* lanes draw ahead (issue 20): a lane's posterior changes only when its arm is pulled, so a
+* lanes draw ahead: a lane's posterior changes only when its arm is pulled, so a
   lane whose draw for round t is accepted goes on to its draw for round t + 1 (up to
   ``LOOKAHEAD`` rounds ahead) while the seed waits for a rejected lane; when the seed plays,
   only the pulled lane's draws ahead are dropped, and that one lane retries at once on
@@ -25,7 +25,7 @@ Why it is faster than the general runner (0.039M seed-rounds/s at K = 64 on 2 co
   lane's own rate is bounded by BB's acceptance, ~1.2 tries per round), against 1.46 steps
   of two tries before lanes drew ahead. (Compacting the rejected lanes instead, by gathers
   or one-hot packing, measured 10–50× slower on XLA:CPU.)
-* one pass per try (2026-11-24, issue 20): a try is :func:`sern_jax.core.prng.beta_try_packed`,
+* one pass per try: a try is :func:`sern_jax.core.prng.beta_try_packed`,
   one held value per lane (the draw, or ``REJECTED``). Given a try's two outputs, XLA:CPU
   had materialised each of its logs, exps, divisions and shared values as an array of its
   own and recomputed the threefry hash in several of them (74 fusions per loop step before,

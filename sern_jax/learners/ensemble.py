@@ -8,9 +8,8 @@ Two layouts (``--ensemble-heads``). ``shared``, the default: Bootstrapped DQN's 
 al. 2016), one network θ and M linear heads on its last hidden features, about one
 network's cost per round (:func:`_shared_heads`). ``networks``: M whole network copies
 (Riquelme et al. 2018's BootRMS), M forwards per greedy evaluation and M fits per update.
-The default was ``networks`` until the comparison's rerun with shared heads (issue 18,
-``docs/RESULTS.md`` Baselines): shared heads is the layout of the paper the issue cites for
-this learner and the only one within the issue's 1.5x-of-SERN round cost at M >= 3.
+Shared heads is the default: it is the layout of the paper this learner follows, and the
+one whose round costs about one network's, like SERN's, at M >= 3.
 
 Bootstrap weights (``--bootstrap``): ``bernoulli`` (each row kept in a member's data with
 probability ``--bootstrap-p``, weight 0 or 1: the Showdown's BootRMS, p = 0.95, and

@@ -1,4 +1,4 @@
-"""The baseline learners (issue 18): neural_linucb, neural_lints, ensemble_ts, neural_ucb,
+"""The baseline learners: neural_linucb, neural_lints, ensemble_ts, neural_ucb,
 normalized, egreedy_decay, sern_decay, on a tiny MLP (fast; not the grasp net).
 
 Each never picks a masked candidate, its probabilities sum to 1 over the valid slots, it is
@@ -505,7 +505,7 @@ SHARED = ensemble.EnsembleConfig(ensemble_size=3, ensemble_heads="shared")
 
 
 def test_ensemble_default_layout_is_shared_heads():
-    """The default since the comparison's rerun (issue 18); whole networks stay selectable
+    """The default since the comparison's rerun; whole networks stay selectable
     under the flag's existing value."""
     assert ensemble.EnsembleConfig() == dataclasses.replace(SHARED, ensemble_size=3)
     lrn = ensemble.ensemble_ts(MODEL, TRAIN)

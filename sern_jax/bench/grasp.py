@@ -25,11 +25,10 @@ use :func:`sern_jax.infra.timing.time_calls`. The JSON fields are ``sern bench g
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from typing import Callable
 
-from sern_jax.infra import io, timing
+from sern_jax.infra import hosts, io, timing
 
 __all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "objects_benchmark",
            "quality_net_benchmark", "random_grasps"]
@@ -147,7 +146,7 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
     noise = [sim.sample_noise(jax.random.fold_in(key, 1000 + i), n) for i in range(len(models))]
     stacked = sim.TrialNoise(*(np.stack([z[k] for z in noise]) for k in range(3)))
     total = n * len(models)
-    threads = threads or os.cpu_count()
+    threads = threads or hosts.cpu_threads()
     natives = [sim.GraspSimulator(m, "native", num_threads=threads) for m in models]
     tm = timing.time_calls(lambda: [s.run_trials(g, z) for s, g, z in zip(natives, grasps, noise)],
                            repeats, warmup=1)
@@ -228,7 +227,7 @@ def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
         return results, compile_s
 
     backends = {}
-    threads = cfg.threads or os.cpu_count()
+    threads = cfg.threads or hosts.cpu_threads()
     if native_batches:
         rows, _ = time_backend("native", native_batches, num_threads=threads)
         backends["native"] = {"threads": threads, "batches": rows}

@@ -34,6 +34,7 @@ import numpy as np
 from sern_jax.core import contextual_problems as cp
 from sern_jax.engine import networks
 from sern_jax.engine import neural as nr
+from sern_jax.infra import hosts
 from sern_jax.learners import base, registry
 from sern_jax.engine.simulate import AGENT_STREAM, ENV_STREAM, ROUNDS_STREAM, seed_keys
 
@@ -163,10 +164,7 @@ def machine() -> dict:
                     break
     except OSError:
         pass
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count()
+    cores = hosts.usable_cores()
     try:
         load = os.getloadavg()[0]
     except OSError:

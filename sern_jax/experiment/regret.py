@@ -338,9 +338,6 @@ def run_experiment(exp: RegretExperiment, out_dir: str | Path, *, progress: bool
     """
     import jax
 
-    from sern_jax.engine import drive as executor
-    from sern_jax.engine import simulate as sim
-
     run_dir = Path(out_dir)
     from sern_jax.infra import validate
 

@@ -50,6 +50,8 @@ from typing import Any
 
 import numpy as np
 
+from sern_jax.infra import hosts
+
 __all__ = [
     "DIGEST_KEY",
     "LOCK_FILE",
@@ -594,8 +596,7 @@ def machine(*, devices: bool = False) -> dict[str, Any]:
         "processor": platform.processor() or platform.machine(),
         "machine": platform.machine(),
         "cpu_count": os.cpu_count(),
-        "cores_usable": (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                         else os.cpu_count()),
+        "cores_usable": hosts.usable_cores(),
         "system": platform.system(),
         "platform": platform.platform(),
         "python": platform.python_version(),

@@ -78,7 +78,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 
 from sern_jax.core import policies as pol
 from sern_jax.learners import base

@@ -56,7 +56,6 @@ import copy
 import dataclasses
 import functools
 import math
-import os
 import threading
 from typing import NamedTuple
 
@@ -67,6 +66,7 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from sern_jax.grasp.world import scene as scene_lib
+from sern_jax.infra import hosts
 
 __all__ = [
     "BACKENDS",
@@ -779,7 +779,7 @@ class GraspSimulator:
       model: a scene from ``scene.build_scene`` (its ``qpos0`` is the resting pose).
       backend: ``"native"`` (MuJoCo C, ``mujoco.rollout``) or ``"mjx"``.
       config: trial schedule, success rule and randomisation ranges.
-      num_threads: native threads (default: ``os.cpu_count()``).
+      num_threads: native threads (default: :func:`sern_jax.infra.hosts.cpu_threads`).
       chunk: native trials per rollout call (memory: chunk x steps x state doubles).
       mjx_batch: MJX trials per compiled call (None: each call padded to the next power
         of two, one compile per size; an int: chunks of exactly this many, one compile).
@@ -808,7 +808,7 @@ class GraspSimulator:
         self.backend, self.config, self.model = backend, config, model
         self.ids = scene_lib.scene_ids(model)
         if backend == "native":
-            threads = num_threads or os.cpu_count() or 1
+            threads = num_threads or hosts.cpu_threads()
             if threads < 1 or chunk < 1:
                 raise ValueError(
                     f"num_threads and chunk must be >= 1, got {threads}, {chunk}"

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 import math
 
 import jax
@@ -461,7 +460,7 @@ def _static_diff(a, b) -> list[str]:
         va, vb = getattr(a, f.name), getattr(b, f.name)
         if f.name == "_impl":
             continue
-        la, lb = jax.tree_util.tree_leaves(va), jax.tree_util.tree_leaves(vb)
+        la = jax.tree_util.tree_leaves(va)
         if jax.tree_util.tree_structure(va) != jax.tree_util.tree_structure(vb):
             out.append(f.name)
         elif not la and not (np.shape(va) == np.shape(vb) and np.array_equal(

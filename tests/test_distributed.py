@@ -694,7 +694,7 @@ def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
                        timeout=120)
         code = (
             "import sys\n"
-            "from sern_jax import distributed\n"
+            "from sern_jax.infra import distributed\n"
             "distributed_run = distributed.run_units\n"
             "def spread(units, config, run_dir, **kw):\n"
             "    import dataclasses\n"
@@ -719,8 +719,8 @@ def test_two_node_loopback_cluster_with_a_killed_worker(tmp_path):
         config = dataset.DatasetConfig(num_objects=4, poses_per_object=1, objects_per_shard=1)
         dataset.generate(config, d0_one, progress=False, log=lambda s: None)
         code = (
-            "from sern_jax import distributed\n"
-            "from sern_jax.grasp import dataset\n"
+            "from sern_jax.infra import distributed\n"
+            "from sern_jax.grasp.model import dataset\n"
             "config = dataset.DatasetConfig(num_objects=4, poses_per_object=1, "
             "objects_per_shard=1)\n"
             f"dataset.generate(config, {str(d0_par)!r}, progress=False, ray=distributed."

@@ -104,6 +104,6 @@ def test_installed_tiny_grasp_learn_on_the_shipped_theta0(installed):
     table = json.loads((out / "table.json").read_text())
     assert table, "empty Table I"
     config = json.loads((out / "config.json").read_text())
-    shipped = _run([python, "-c", "from sern_jax.grasp import artifacts; "
+    shipped = _run([python, "-c", "from sern_jax.grasp.model import artifacts; "
                     "print(artifacts.load_theta0().fingerprint)"], cwd=work, env=env).stdout
     assert config["theta0"] == shipped.strip()

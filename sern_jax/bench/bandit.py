@@ -3,8 +3,8 @@
 ``sern bench bandit`` is :func:`bandit_benchmark` plus flags and printing; a library user calls
 it directly::
 
-    from sern_jax import benchmarks
-    result = benchmarks.bandit_benchmark(benchmarks.BanditWorkload(horizon=1_000, seeds=512))
+    from sern_jax.bench import bandit
+    result = bandit.bandit_benchmark(bandit.BanditWorkload(horizon=1_000, seeds=512))
     result["speedup_vs_numpy"], result["machine"]
 
 Workload: SERN softmax(r̂/α) with the add-half estimator, K Bernoulli arms with

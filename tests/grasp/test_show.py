@@ -113,7 +113,7 @@ def test_commands_that_render_nothing_ignore_an_unloadable_mujoco_gl(tmp_path):
                            capture_output=True, text=True, timeout=300)
     assert plain.returncode != 0 and "MUJOCO_GL" in plain.stderr  # the control
     script = ("import os\n"
-              "from sern_jax.grasp import objects, scene, sim\n"
+              "from sern_jax.grasp.world import objects, scene, sim\n"
               "model = scene.build_scene(objects.make_object('small_box'), seed=0)\n"
               "res = sim.GraspSimulator(model, 'native', num_threads=1).run_trials(\n"
               "    scene.centred_grasp(model)[None], sim.sample_noise(__import__('jax').random.key(0), 1))\n"

@@ -121,6 +121,10 @@ class DatasetConfig:
         default scene and trial), so a D0 made under another trial is another dataset."""
         d = dataclasses.asdict(self)
         d["physics"] = sim_lib.physics_settings()
+        if self.backend == "mjx":  # MJX trials run on the uniform scenes: their version too
+            from sern_jax.grasp.world import uniform
+
+            d["mjx_program"] = uniform.MJX_PROGRAM
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -249,6 +249,10 @@ def run_fingerprint(config: OnlineConfig, specs: list[objects_lib.ObjectSpec],
     objects = [(s.name, repr(s)) for s in specs]
     text = (f"v{CHECKPOINT_VERSION}" + config.fingerprint() + json.dumps(objects)
             + theta0.fingerprint + json.dumps(sim_lib.physics_settings(), sort_keys=True))
+    if config.backend == "mjx":  # MJX trials run on the uniform scenes: their version too
+        from sern_jax.grasp.world import uniform
+
+        text += uniform.MJX_PROGRAM
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

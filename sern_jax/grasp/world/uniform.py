@@ -78,6 +78,9 @@ MAX_FACE_VERTICES = 20  # MJX's most vertices per (merged coplanar) hull face
 RESAMPLE_TOLERANCE = 0.15
 
 
+MJX_PROGRAM = "uniform-1"  # the MJX scenes' structure: a change makes MJX runs other runs
+
+
 @dataclasses.dataclass(frozen=True)
 class UniformShape:
     """The fixed structure of a uniform scene.

@@ -252,8 +252,8 @@ def add_screen_parser(subparsers) -> argparse.ArgumentParser:
         description=(
             "For each object: over --poses random resting poses, the success frequency "
             "(--trials trials) of θ0's greedy choice and of the best of the 64 candidates. An "
-            "object is hard when θ0's greedy choice succeeds at most 60%% of the time while "
-            "the best candidate succeeds at least 80%% of the time."))
+            "object is hard when θ0's greedy choice succeeds at most 60% of the time while "
+            "the best candidate succeeds at least 80% of the time."))
     p.add_argument("objects", nargs="*", metavar="OBJECT",
                    help="object names (default: every named object)")
     p.add_argument("--mesh", action="append", default=[], metavar="PATH")

@@ -38,7 +38,7 @@ def add_parser(subparsers, *, defaults: Any, run_experiment: Callable,
             "Runs each policy on the same Bernoulli (or finite-context) bandit for many seeds "
             "with common random numbers, saves config.json, metadata.json, results.npz, "
             "summary.json and report.md in the run directory, and draws figures/regret.png "
-            "(log-log regret with 95%% bands and fitted slopes) and figures/exploration.png "
+            "(log-log regret with 95% bands and fitted slopes) and figures/exploration.png "
             "(N_a(t)/t against Theorem 1's floor c = e^{-1/alpha}/K). Finished seed chunks are "
             "saved as they complete: rerunning the same command resumes an interrupted run."
         ),

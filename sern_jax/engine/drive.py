@@ -96,7 +96,8 @@ def run_seeds(
       chunk_size: seeds per jitted call. Every call has this shape (the last one is padded), so
         runs of any ``num_seeds`` with the same ``chunk_size`` share one compilation. Default:
         :func:`~sern_jax.engine.plan.default_chunk_size` (bounds memory).
-      runner: ``"auto"`` (fast runner where it is exact), ``"fast"`` or ``"general"``; see
+      runner: ``"auto"`` (the fused kernel on one GPU where it applies, else the fast runner
+        where it is exact), ``"fast"``, ``"general"`` or ``"pallas"``; see
         :func:`~sern_jax.engine.plan.plan_run`.
       progress: called with the number of seeds finished after each call.
       summary: reduce over seeds on the device instead of returning per-seed arrays: each

@@ -35,7 +35,12 @@ def test_run_seeds_outputs_are_unchanged():
     _compare(pins.engine_pins())
 
 
-@pytest.mark.parametrize("name", sorted(pins.COMMANDS))
+# the tabular regret run in the default suite; the neural regret run and the small learning run
+# (half a minute each on 2 cores, their paths pinned also by tests/grasp/test_runner.py's
+# reference and tests/test_neural_regret_cli.py) with -m slow
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=() if n == "regret_tabular" else pytest.mark.slow)
+    for n in sorted(pins.COMMANDS)])
 def test_command_outputs_are_unchanged(name):
     _same_jax()
     _compare(pins.command_pins({name: pins.COMMANDS[name]}))

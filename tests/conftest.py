@@ -29,6 +29,8 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/test_proofs_check.py",  # the quick checks: ~125 s
     "tests/test_distributed.py",  # local Ray: ~2 min
     "tests/grasp/test_runner.py",
+    "tests/learners/test_engine_contract.py",  # every learner through the neural engine
+    "tests/grasp/test_mjx_one_program.py",  # one MJX compile on the CPU: ~90 s
     "tests/test_simulate.py",
     "tests/grasp/test_sim.py",
     "tests/grasp/test_asktell.py",
@@ -36,7 +38,10 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/learners/test_baseline_learners.py",
     "tests/test_neural_linear_arms.py",
     "tests/test_cli_fuzz.py",
+    "tests/test_validation.py",
     "tests/test_executor.py",
+    "tests/test_docs_examples.py",
+    "tests/test_layout_pins.py",
 ]
 
 

@@ -85,12 +85,17 @@ def script_parser(spec=None, **kwargs) -> OneLineParser:
     command puts in ``sys.argv[0]``), else ``python -m <module>`` (the module's name from
     its ``__spec__``; without one, a file run as ``python experiments/NAME.py``, argparse's
     default, the file's name). Subparsers inherit the class, so their errors are one line
-    too; ``--help`` is unchanged.
+    too; ``--help`` is unchanged. Like the ``sern`` entry point, it turns on XLA's
+    deterministic GPU options (:func:`sern_jax.infra.hosts.use_deterministic_xla`) before the
+    script computes anything, so a rerun on a GPU gives the same bits.
 
     Args:
       spec: the script's ``__spec__`` (a ``ModuleSpec`` or None) or its module name.
       **kwargs: passed on to ``argparse.ArgumentParser`` (``description``, ...).
     """
+    from sern_jax.infra import hosts
+
+    hosts.use_deterministic_xla()
     module = spec if isinstance(spec, str) or spec is None else spec.name
     if "prog" not in kwargs:
         argv0 = sys.argv[0] if sys.argv else ""

@@ -58,6 +58,10 @@ __all__ = [
     "object_names",
     "hard_object_names",
     "make_object",
+    "WEDGE_COUNT",
+    "wedge",
+    "wedge_names",
+    "wedge_params",
     "load_mesh",
     "resolve_object",
 ]
@@ -522,6 +526,60 @@ _HARD = {
     "tless_part_c_steel": _steel(_tless_part_c),
 }
 
+
+# ----------------------------------------------------------------------------- wedge family
+
+# Prisms whose gripping faces are sloped (graded difficulty in the spirit of EGAD): a
+# parallel-jaw grasp across two faces that lean by more than the friction cone's half-angle
+# squeezes the object out, while the end faces (parallel, the prism's length apart) hold.
+# Seen from above, the short way across looks like a box's width, which θ0 (trained on
+# primitives with parallel sides) ranks high. Member i's shape comes from the i-th point
+# of a 5-dimensional additive quasi-random sequence (Roberts' R_d), so every member is
+# rebuilt from its index alone, with no random number generator.
+WEDGE_COUNT = 64  # wedge_0 .. wedge_63
+WEDGE_DENSITY = 1200.0  # kg/m³ (a dense plastic such as acetal)
+_WEDGE_PHI = 1.2207440846057596  # the unique positive root of x^6 = x + 1 (R_5)
+
+
+def wedge_params(index: int) -> dict:
+    """The parameters of ``wedge_<index>`` (metres, degrees, kg): ``section`` ("triangle"
+    or "trapezoid"), ``base_angle`` (each sloped face against the base), ``base_width``,
+    ``top_width`` (0 for a triangle), ``height``, ``length`` (along the prism's axis) and
+    ``mass``."""
+    if not (isinstance(index, int) and 0 <= index < WEDGE_COUNT):
+        raise ValueError(f"wedge index must be an int in [0, {WEDGE_COUNT - 1}], got {index!r}")
+    u = [math.fmod(0.5 + (index + 1) / _WEDGE_PHI ** (d + 1), 1.0) for d in range(5)]
+    section = "triangle" if u[0] < 0.5 else "trapezoid"
+    base_angle = 45.0 + 30.0 * u[1]
+    base_width = 0.035 + 0.025 * u[2]
+    top_width = 0.0 if section == "triangle" else base_width * (0.2 + 0.4 * u[4])
+    height = min(0.5 * (base_width - top_width) * math.tan(math.radians(base_angle)), 0.05)
+    if section == "triangle":  # a height cap cuts the apex: the section is a trapezoid
+        top_width = max(0.0, base_width - 2 * height / math.tan(math.radians(base_angle)))
+    length = 0.05 + 0.025 * u[3]
+    area = 0.5 * (base_width + top_width) * height
+    mass = float(min(max(WEDGE_DENSITY * area * length, MIN_MASS_KG), MAX_MASS_KG))
+    return {"section": section, "base_angle": round(base_angle, 6),
+            "base_width": round(base_width, 6), "top_width": round(top_width, 6),
+            "height": round(height, 6), "length": round(length, 6), "mass": round(mass, 6)}
+
+
+def wedge(index: int) -> ObjectSpec:
+    """``wedge_<index>``: a prism (see :func:`wedge_params`) lying on its base, its axis
+    along x, its base centred under the origin."""
+    p = wedge_params(index)
+    b, t, h, half_len = p["base_width"], p["top_width"], p["height"], p["length"] / 2
+    section = [(-b / 2, 0.0), (b / 2, 0.0)]
+    section += [(t / 2, h), (-t / 2, h)] if t > 1e-4 else [(0.0, h)]
+    zc = h / 3  # the section's centroid is near a third of its height
+    pts = [[x, y, z - zc] for x in (-half_len, half_len) for y, z in section]
+    return ObjectSpec(f"wedge_{index}", (_mesh(pts),), p["mass"], "wedge", p["section"])
+
+
+def wedge_names() -> tuple[str, ...]:
+    """Every member of the wedge family, ``wedge_0`` .. ``wedge_63``."""
+    return tuple(f"wedge_{i}" for i in range(WEDGE_COUNT))
+
 # ----------------------------------------------------------------------------- population
 
 POPULATION_KINDS = (
@@ -721,6 +779,9 @@ def make_object(name: str) -> ObjectSpec:
         return _NAMED[name]()
     if name in _HARD:
         return _HARD[name]()
+    wedge_match = _WEDGE_NAME.fullmatch(name)
+    if wedge_match and int(wedge_match["index"]) < WEDGE_COUNT:
+        return wedge(int(wedge_match["index"]))
     match = _POPULATION_NAME.fullmatch(name)
     if match and match["kind"] in POPULATION_KINDS:
         seed, index = int(match["seed"]), int(match["index"])
@@ -736,10 +797,13 @@ def make_object(name: str) -> ObjectSpec:
         return spec
     raise ValueError(
         f"unknown object {name!r}; known objects: {', '.join(object_names())}"
+        f", wedge_0 .. wedge_{WEDGE_COUNT - 1} (the wedge family)"
         f", population members <kind>_<seed>_<index> (kind in {', '.join(POPULATION_KINDS)};"
         " as named by sample_population), or a mesh path ending in .obj/.stl"
     )
 
+
+_WEDGE_NAME = re.compile(r"wedge_(?P<index>0|[1-9][0-9]{0,3})")
 
 # A member of sample_population(seed, n), by the name that function gives it.
 _POPULATION_NAME = re.compile(r"(?P<kind>[A-Za-z]+)_(?P<seed>\d+)_(?P<index>\d+)")

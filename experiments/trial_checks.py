@@ -66,8 +66,9 @@ def fixed_trials(names, poses: int, candidates: int, seed: int):
 
 
 def outcomes(trials, timestep_factor: int = 1, finger_force: float | None = None,
-             threads: int | None = None) -> np.ndarray:
-    """[N] bool successes of the fixed trials in one setting (all objects, concatenated)."""
+             threads: int | None = None, backend: str = "native") -> np.ndarray:
+    """[N] bool successes of the fixed trials in one setting (all objects, concatenated);
+    ``backend="mjx"``: the MJX backend's one program for every object (uniform scenes)."""
     import dataclasses
 
     from sern_jax.grasp.world import context, scene, sim
@@ -79,7 +80,8 @@ def outcomes(trials, timestep_factor: int = 1, finger_force: float | None = None
     res = []
     for spec, g, p, noise in trials:
         model = context.scene_model(spec, context.ContextConfig(scene=cfg))
-        simulator = sim.GraspSimulator(model, "native", config=trial, num_threads=threads)
+        simulator = sim.GraspSimulator(model, backend, config=trial,
+                                       num_threads=threads if backend == "native" else None)
         r = simulator.run_trials(g, noise, object_pose=p)
         res.append(r.success & ~r.nan)
     return np.concatenate(res)
@@ -113,6 +115,11 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=validate.int_in(0, 2**31 - 1), default=0)
     ap.add_argument("--forces", default="6,40",
                     help="grips (newtons per finger) to compare with the default")
+    ap.add_argument("--steps", default="2,4",
+                    help="time-step divisors to compare with the default 5 ms step")
+    ap.add_argument("--mjx", action="store_true",
+                    help="also run the trials with MJX (one program for every object) and "
+                         "report its agreement with native MuJoCo")
     ap.add_argument("--threads", type=count, default=None)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
@@ -122,9 +129,13 @@ def main(argv=None) -> int:
     except ValueError as exc:
         ap.error(str(exc))
     try:
-        forces = validate.comma_list_of(args.forces, "--forces", float, "numbers")
+        forces = (validate.comma_list_of(args.forces, "--forces", float, "numbers")
+                  if args.forces else [])
+        steps = validate.comma_list_of(args.steps, "--steps", int, "integers")
     except ValueError as exc:
         ap.error(str(exc))
+    if not steps or any(not (2 <= k <= 16) for k in steps):
+        ap.error("--steps must list integers in [2, 16]")
     if any(not (0 < f < 1e6) for f in forces):
         ap.error("--forces must lie in (0, 1e6) newtons")
     from sern_jax.grasp.world import objects as objects_lib
@@ -152,12 +163,21 @@ def main(argv=None) -> int:
            "default_success_per_object": _per_object(sizes, names, base),
            "timestep": {}, "grip": {}}
     by_dt = {1: base}
-    for k in (2, 4):
+    for k in steps:
         by_dt[k] = outcomes(trials, k, threads=args.threads)
         res["timestep"][f"5ms_vs_{5 / k:g}ms"] = _agree(base, by_dt[k])
-    res["timestep"]["2.5ms_vs_1.25ms"] = _agree(by_dt[2], by_dt[4])
+    if 2 in by_dt and 4 in by_dt:
+        res["timestep"]["2.5ms_vs_1.25ms"] = _agree(by_dt[2], by_dt[4])
     res["timestep"]["success"] = {f"{5 / k:g}ms": float(v.mean()) for k, v in by_dt.items()}
     res["timestep"]["success_per_object"] = _per_object(sizes, names, *by_dt.values())
+    if args.mjx:
+        out_mjx = outcomes(trials, 1, backend="mjx")
+        row = _agree(base, out_mjx)
+        row["success"] = {"native": float(base.mean()), "mjx": float(out_mjx.mean())}
+        row["per_object_success"] = _per_object(sizes, names, base, out_mjx)
+        row["per_object_agree"] = _per_object(sizes, names, base == out_mjx)
+        row["native_only"], row["mjx_only"] = row.pop("a_only"), row.pop("b_only")
+        res["mjx"] = row
     for f in forces:
         out_f = outcomes(trials, 1, finger_force=f, threads=args.threads)
         row = _agree(base, out_f)
@@ -181,6 +201,10 @@ def main(argv=None) -> int:
             print(f"time step {k}: {v['agree']}/{v['n']} agree ({100 * v['fraction']:.1f} %, "
                   f"95 % CI {100 * v['ci95'][0]:.1f}-{100 * v['ci95'][1]:.1f} %)")
     print("success by step:", res["timestep"]["success"])
+    if "mjx" in res:
+        v = res["mjx"]
+        print(f"native vs MJX: {v['agree']}/{v['n']} agree ({100 * v['fraction']:.1f} %, 95 % CI "
+              f"{100 * v['ci95'][0]:.1f}-{100 * v['ci95'][1]:.1f} %)")
     for k, v in res["grip"].items():
         print(f"{default_force:g} N vs {k}: success {100 * res['default_success']:.1f} % -> "
               f"{100 * v['success']:.1f} %; {v['fail_at_default_success_at_f']} failures "

@@ -1441,6 +1441,67 @@ def performance_neural() -> str:
                   "hardware", "record"], rows)
 
 
+# ----------------------------------------------------------------------------- benchmark
+# The grasp-exploration benchmark's blocks read experiments/results/benchmark/summary.json
+# (experiments/benchmark.py), whose numbers are already in percent and percentage points.
+# Each builder takes the summary (default: that file), so it is registered with
+# ``@block("benchmark-leaderboard")`` / ``@block("benchmark-screen")`` once a page marks
+# the block.
+
+BENCHMARK = RESULTS / "benchmark" / "summary.json"
+
+
+def _benchmark_summary(summary: dict | None) -> dict:
+    return _json(BENCHMARK) if summary is None else summary
+
+
+def _mean_se(cell: dict) -> str:
+    se = cell.get("se")
+    return _num(cell["mean"], 1, False) + ("" if se is None else f" ({_num(se, 1, False)})")
+
+
+def benchmark_leaderboard(summary: dict | None = None) -> str:
+    """The leaderboard: every learner by curve area (best first), its means over objects with
+    their SE over objects, and the reference minus it on both primary metrics (95 % t over
+    the object means, Holm p of the primary family)."""
+    s = _benchmark_summary(summary)
+    ref = s["reference"]
+    means = s["learner_means"]
+    diff = {(c["b"], c["metric"]): c for c in s["comparisons"]}
+    order = sorted(s["learners"], key=lambda q: -means[q]["curve_area"]["mean"])
+    rows = []
+    for q in order:
+        row = [_bl_name(q)] + [_mean_se(means[q][m])
+                               for m in ("curve_area", "explore_success", "round5")]
+        for m in ("curve_area", "explore_success"):
+            c = diff.get((q, m))
+            if c is None:
+                row.append("(reference)")
+                continue
+            txt = (f"{_num(c['diff'])} {interval(c['ci_low'], c['ci_high'], 1, 1.0)}, "
+                   f"Holm p {pval(c['holm_p'])}")
+            row.append(f"**{txt}**" if c["holm_p"] < 0.05 else txt)
+        rows.append(row)
+    r = _bl_name(ref)
+    return table(["learner", "curve area % (SE)", "exploration success % (SE)",
+                  "round 5 % (SE)", f"{r} − learner, curve area (points)",
+                  f"{r} − learner, exploration success (points)"], rows)
+
+
+def benchmark_screen(summary: dict | None = None) -> str:
+    """The benchmark's objects as the fresh-trial screen measured them."""
+    s = _benchmark_summary(summary)
+    rows = []
+    for e in s["screen"]:
+        passed = {True: "yes", False: "no", None: "—"}[e.get("passed")]
+        rows.append([f"`{e['object']}`", _num(e["theta0_greedy"], 1, False),
+                     _num(e["best_fresh"], 1, False),
+                     f"{e['poses']} × {e['trials']}", f"{e['poses']} × {e['fresh_trials']}",
+                     passed])
+    return table(["object", "θ0 greedy success %", "best candidate, fresh trials %",
+                  "screen poses × trials", "fresh poses × trials", "passes the rule"], rows)
+
+
 # ----------------------------------------------------------------------------- pages
 
 

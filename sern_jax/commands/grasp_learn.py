@@ -1,5 +1,6 @@
 """``sern grasp dataset | pretrain | screen | learn``: arguments only; work happens in
-:mod:`dataset`, :mod:`pretrain` and :mod:`driver` (imported inside each command, so
+:mod:`dataset`, :mod:`pretrain`, :mod:`driver` and, for ``learn --benchmark``,
+:mod:`sern_jax.grasp.online.benchmark` (imported inside each command, so
 ``sern --help`` stays fast: only the learners' registry and its jax/optax imports are
 loaded up front, so that every registered learner's hyperparameters are flags). Figures are
 handed in by :mod:`sern_jax.commands.main`."""
@@ -29,6 +30,18 @@ _FMT = argparse.ArgumentDefaultsHelpFormatter
 
 
 _positive_int = validate.int_at_least(1)  # argparse type: an integer >= 1
+
+
+class _Given(argparse.Action):
+    """argparse's ``store`` that also notes the flag as typed (``args.given``: dest ->
+    flag), so a flag the user gave is told from its default (``--benchmark`` refuses the
+    flags it fixes even when typed with their default value)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        given = dict(getattr(namespace, "given", None) or {})
+        given[self.dest] = option_string or self.option_strings[0]
+        namespace.given = given
 
 
 def _check_out(path: str | None, what: str = "--out") -> None:
@@ -324,27 +337,41 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
             "Fine-tunes the shipped θ0 online on each object with each policy and seed: rounds "
             "of --explore grasps (each on a fresh resting pose, chosen by the policy over the "
             "valid candidates), an optax update on the collected data plus the core set, and "
-            "--evaluate greedy grasps (the paper's evaluation) plus a low-variance evaluation "
+            "--evaluate greedy grasps (the paper's evaluation) plus a fixed-pose evaluation "
             "(--eval-poses fixed poses x --eval-trials trials). Writes table.md / table.json in "
             "the paper's Table I format, results.npz, figures and a checkpoint per round (an "
             "interrupted run resumes). Default objects: the hard set chosen by the screen "
-            "shipped with θ0. Learners (--policies): " + _learner_summaries()))
+            "shipped with θ0. --benchmark NAME runs a versioned grasp-exploration benchmark "
+            "(sern_jax/grasp/data/benchmarks): its objects, world, protocol, seeds and tuned "
+            "hyperparameters, for the learners of --policies (default: the benchmark's; any "
+            "other registered learner runs with its defaults); OBJECT names one of its "
+            "objects (a part of the run), --seeds and --rounds a smaller run. Learners "
+            "(--policies): " + _learner_summaries()))
     p.add_argument("objects", nargs="*", metavar="OBJECT",
-                   help="object names or .obj/.stl paths (default: the hard set)")
+                   help="object names or .obj/.stl paths (default: the hard set; with "
+                        "--benchmark: objects of the benchmark, default all of them)")
+    p.add_argument("--benchmark", default=None, metavar="NAME",
+                   help="a shipped benchmark's name, or the path of a benchmark .json file: "
+                        "objects, world, protocol, seeds and tuned hyperparameters come "
+                        "from it (the flags it fixes are refused)")
     p.add_argument("--mesh", action="append", default=[], metavar="PATH",
                    help="an OBJ/STL mesh (repeatable); any mesh `sern grasp show` takes")
-    p.add_argument("--mesh-units", choices=_MESH_UNITS, default="auto",
+    p.add_argument("--mesh-units", choices=_MESH_UNITS, default="auto", action=_Given,
                    help="units of the mesh files' coordinates (as in `sern grasp show`)")
-    p.add_argument("--policies", default="sern,egreedy,greedy",
-                   help="comma-separated learners (sern_jax.learners.registry)")
-    p.add_argument("--seeds", type=_positive_int, default=5)
-    p.add_argument("--rounds", type=_positive_int, default=5)
-    p.add_argument("--explore", type=_positive_int, default=20)
-    p.add_argument("--evaluate", type=_positive_int, default=5)
+    p.add_argument("--policies", default="sern,egreedy,greedy", action=_Given,
+                   help="comma-separated learners (sern_jax.learners.registry; with "
+                        "--benchmark the default is the benchmark's learners)")
+    p.add_argument("--seeds", type=_positive_int, default=5, action=_Given,
+                   help="seeds per object and learner (with --benchmark: its first N "
+                        "seeds, default all)")
+    p.add_argument("--rounds", type=_positive_int, default=5, action=_Given,
+                   help="rounds (with --benchmark: at most the benchmark's, default all)")
+    p.add_argument("--explore", type=_positive_int, default=20, action=_Given)
+    p.add_argument("--evaluate", type=_positive_int, default=5, action=_Given)
     _add_learner_flags(p)
-    p.add_argument("--eval-poses", type=int, default=4,
-                   help="fixed poses of the low-variance evaluation (0 = off)")
-    p.add_argument("--eval-trials", type=int, default=8)
+    p.add_argument("--eval-poses", type=int, default=4, action=_Given,
+                   help="fixed poses of the fixed-pose evaluation (0 = off)")
+    p.add_argument("--eval-trials", type=int, default=8, action=_Given)
     p.add_argument("--regret-trials", type=int, default=0, metavar="M",
                    help="regret accounting: simulate every valid candidate of every "
                         "exploration pose M times (the oracle) and report each round's "
@@ -355,16 +382,19 @@ def add_learn_parser(subparsers, make_figures: Callable | None = None) -> argpar
                         "grasps of each round only and scale their pseudo-regret by "
                         "--explore / G (an unbiased estimate at G / --explore of the "
                         "cost); 0 = every grasp")
-    p.add_argument("--fit-steps", type=validate.int_in(1, 100_000), default=40)
-    p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp")
-    p.add_argument("--loss", choices=("bce", "l1"), default="bce")
+    p.add_argument("--fit-steps", type=validate.int_in(1, 100_000), default=40,
+                   action=_Given)
+    p.add_argument("--core-set", choices=("dpp", "random", "none"), default="dpp",
+                   action=_Given)
+    p.add_argument("--loss", choices=("bce", "l1"), default="bce", action=_Given)
     p.add_argument("--theta0", default=None, help="θ0 directory (default: the shipped one)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--backend", choices=("native", "mjx"), default="native",
+    p.add_argument("--seed", type=int, default=0, action=_Given)
+    p.add_argument("--backend", choices=("native", "mjx"), default="native", action=_Given,
                    help="physics of the trials: native MuJoCo on the CPU's cores, or MJX "
-                        "(for a GPU: one compile per object, then batches of "
-                        "config.MJX_BATCH trials); outcomes of the two agree on most "
-                        "trials but not bit for bit, so tables differ")
+                        "(for a GPU: one compiled program for every object, then batches "
+                        "of config.MJX_BATCH trials); outcomes of the two agree on most "
+                        "trials but not bit for bit, so tables differ (with --benchmark: "
+                        "default the benchmark's, and the run records the one used)")
     p.add_argument("--out", default=None, help="run directory (default runs/learn-<hash>)")
     p.add_argument("--json-out", default=None, help="write the Table I rows as JSON here")
     p.add_argument("--no-figures", action="store_true")
@@ -457,7 +487,7 @@ def _add_learner_flags(p) -> None:
 
     for name, field in registry.hyperparameters().items():
         p.add_argument(field.metadata["flag"], dest=name, type=_flag_value(field.default),
-                       default=field.default, help=field.metadata.get("help"))
+                       default=field.default, help=field.metadata.get("help"), action=_Given)
 
 
 def learner_hyperparameters(args) -> dict:
@@ -507,16 +537,23 @@ def _check_run_dir(out: Path, fingerprint: str) -> None:
                             "--out)")
 
 
-def check_learn_args(args, num_objects: int | None = None):
+def check_learn_args(args, num_objects: int | None = None, bench=None):
     """What ``sern grasp learn`` can check before θ0 and the objects are loaded: the output
     paths, the float flags (:func:`_check_learn_values`), the OnlineConfig and, when the
     number of objects is known, the run's size (:mod:`sern_jax.grasp.online.budget`). Returns the
-    OnlineConfig. ``sern reproduce`` calls it before its first part runs."""
+    OnlineConfig. ``sern reproduce`` calls it before its first part runs. With ``bench`` (a
+    loaded benchmark, ``--benchmark``) the OnlineConfig is the benchmark's
+    (:func:`_benchmark_config`)."""
     _check_out(args.out)
     from sern_jax.infra import io
 
     io.refuse_if_locked(args.out)  # a running learn there: refused before imports, compiles
     _check_file_out(args.json_out)
+    if bench is not None:
+        config = _benchmark_config(args, bench)
+        if num_objects is not None:
+            _check_learn_size(config, num_objects, args.out)
+        return config
     policies = tuple(validate.comma_list(args.policies, "--policies"))
     _check_learn_values(args, policies)
     from sern_jax.grasp.online import config as online_config
@@ -545,8 +582,71 @@ def check_learn_args(args, num_objects: int | None = None):
     return config
 
 
+# --benchmark: the flags whose settings a benchmark fixes (argparse dest -> what it fixes);
+# the hyperparameter flags of the learners it tunes are refused too
+_BENCHMARK_FIXES = {
+    "explore": "protocol", "evaluate": "protocol", "eval_poses": "protocol",
+    "eval_trials": "protocol", "fit_steps": "protocol", "core_set": "protocol",
+    "loss": "protocol", "seed": "protocol", "mesh_units": "objects",
+}
+
+
+def _load_benchmark(args):
+    """The benchmark ``--benchmark`` names (None without the flag): one line naming the
+    flag and the known names for an unknown one, naming the file for a damaged one."""
+    name = getattr(args, "benchmark", None)
+    if name is None:
+        return None
+    from sern_jax.grasp.online import benchmark
+
+    return benchmark.resolve(name, "--benchmark")
+
+
+def _benchmark_config(args, bench):
+    """The OnlineConfig of a ``--benchmark`` run (:func:`benchmark.online_config`): the
+    flags the benchmark fixes are refused when typed (even with their default value),
+    --policies, --seeds and --rounds choose learners and a smaller run, --backend,
+    --regret-trials and --regret-grasps pass through, and the hyperparameter flags of
+    learners the benchmark does not tune set those learners' values."""
+    import dataclasses
+
+    from sern_jax.grasp.online import benchmark
+    from sern_jax.learners import registry
+
+    given = dict(getattr(args, "given", None) or {})
+    tuned = {f.name: name for name in bench.learners
+             for f in dataclasses.fields(registry.LEARNERS[name].config)}
+    for dest, flag in given.items():
+        if dest in _BENCHMARK_FIXES:
+            raise ValueError(f"{flag}: benchmark {bench.name} fixes its "
+                             f"{_BENCHMARK_FIXES[dest]}; leave {flag} out")
+        if dest in tuned:
+            raise ValueError(f"{flag}: benchmark {bench.name} fixes the hyperparameters of "
+                             f"the learners it tunes ({tuned[dest]}); leave {flag} out")
+    if args.mesh:
+        raise ValueError(f"--mesh: benchmark {bench.name} fixes the objects; name one of its "
+                         "objects as OBJECT to run a part of it")
+    policies = (tuple(validate.comma_list(args.policies, "--policies"))
+                if "policies" in given else None)
+    hyper = {dest: getattr(args, dest) for dest in given if dest in registry.hyperparameters()}
+    validate.float32_hyperparameters(
+        hyper, {n: f.metadata["flag"] for n, f in registry.hyperparameters().items()})
+    try:
+        config = benchmark.online_config(
+            bench, policies, seeds=args.seeds if "seeds" in given else None,
+            rounds=args.rounds if "rounds" in given else None, hyper=hyper)
+        config = dataclasses.replace(
+            config, backend=args.backend if "backend" in given else config.backend,
+            regret_trials=args.regret_trials, regret_grasps=args.regret_grasps)
+    except ValueError as e:  # --seeds / --rounds beyond the benchmark's, or OnlineConfig's
+        size = re.match(r"(seeds|rounds) (must .*)", str(e))
+        raise ValueError(f"--{size[1]} {size[2]}" if size else flag_names(str(e))) from None
+    return config
+
+
 def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
-    config = check_learn_args(args)
+    bench = _load_benchmark(args)  # None without --benchmark
+    config = check_learn_args(args, bench=bench)
     from sern_jax.infra import distributed, io
 
     ray = distributed.from_args(args)  # None without --ray
@@ -555,32 +655,56 @@ def run_learn(args, make_figures: Callable | None = None, log=print) -> int:
     from sern_jax.grasp.online import config as online_config
     from sern_jax.grasp.online import driver
 
-    # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
-    # such even where θ0 is missing); the default objects come from θ0's screen
-    explicit = bool(args.objects) or bool(args.mesh)
-    units = getattr(args, "mesh_units", "auto")
-    specs = _specs(args.objects, args.mesh, (), units) if explicit else None
-    if specs is not None:  # sizes before θ0 is even loaded
+    world = (None, None) if bench is None else bench.world
+    if bench is not None:
+        from sern_jax.grasp.online import benchmark
+        from sern_jax.grasp.world import context as context_lib
+        from sern_jax.grasp.world import sim as sim_lib
+
+        if ray is not None and world != (context_lib.ContextConfig(), sim_lib.TrialConfig()):
+            raise ValueError(f"--ray: benchmark {bench.name} changes the simulated world, "
+                             "which Ray units do not carry; run it without --ray, one "
+                             "object (a part) per command")
+        specs = benchmark.select(bench, args.objects)
         _check_learn_size(config, len(specs), args.out)
+    else:
+        # named objects and meshes are checked before θ0 is loaded (a bad mesh is reported as
+        # such even where θ0 is missing); the default objects come from θ0's screen
+        explicit = bool(args.objects) or bool(args.mesh)
+        units = getattr(args, "mesh_units", "auto")
+        specs = _specs(args.objects, args.mesh, (), units) if explicit else None
+        if specs is not None:  # sizes before θ0 is even loaded
+            _check_learn_size(config, len(specs), args.out)
     theta0 = artifacts.load_theta0(args.theta0)
+    if bench is not None:
+        benchmark.check_theta0(bench, theta0,
+                               None if args.theta0 is None else f"--theta0 {args.theta0}")
     if specs is None:
         specs = _specs((), (), artifacts.hard_set(theta0)["objects"])
         _check_learn_size(config, len(specs), args.out)
     t0 = time.perf_counter()
     fingerprint = online_config.run_fingerprint(config, specs, theta0)
+    if bench is not None:  # a benchmark's world, as driver.run fingerprints it
+        fingerprint = online_config.extend_fingerprint(
+            fingerprint, config, tuple(range(config.num_seeds)), *world, ())
     out = Path(args.out) if args.out else Path("runs") / ("learn-" + fingerprint)
     _check_run_dir(out, fingerprint)
+    record = None if bench is None else {
+        "name": bench.name, "version": bench.version, "file": bench.path.name,
+        "objects": [s.name for s in specs], "seeds": config.num_seeds,
+        "rounds": config.rounds, "backend": config.backend}
     with validate.locked_run_dir(out):
         if ray is None:
             res = driver.run(config, specs, out, theta0=theta0,
-                             progress=not args.no_progress, log=log)
+                             progress=not args.no_progress, log=log,
+                             context_config=world[0], trial_config=world[1])
         else:  # one Ray task per object, joined into the same run directory
             from sern_jax.grasp.online import learn_units
 
             res = learn_units.run(config, specs, out, theta0=theta0, ray=ray,
                                   progress=not args.no_progress, log=log)
         seconds = time.perf_counter() - t0
-        write_learn_outputs(out, res, seconds, theta0)
+        write_learn_outputs(out, res, seconds, theta0, benchmark=record)
         table = format_table(res["table"])
         print(table)
         if not args.no_figures and make_figures is not None:
@@ -606,16 +730,20 @@ def _check_learn_size(config, num_objects: int, out) -> None:
                            if name == "ensemble_ts" else 1 for name in config.policies)), out)
 
 
-def write_learn_outputs(out: Path, res: dict, seconds: float, theta0) -> None:
-    """config.json, metadata.json, results.npz, table.md/json, report.md of a learn run."""
+def write_learn_outputs(out: Path, res: dict, seconds: float, theta0,
+                        benchmark: dict | None = None) -> None:
+    """config.json, metadata.json, results.npz, table.md/json, report.md of a learn run;
+    ``benchmark`` (a ``--benchmark`` run: its name, version, file, and the objects, seeds,
+    rounds and backend run) goes into config.json and metadata.json."""
     from sern_jax.infra import io
 
+    extra = {} if benchmark is None else {"benchmark": benchmark}
     io.save_json(out / "config.json", {"config": res["config"], "objects": res["objects"],
                                        "theta0": theta0.fingerprint,
-                                       "fingerprint": res["fingerprint"]})
+                                       "fingerprint": res["fingerprint"], **extra})
     io.save_json(out / "metadata.json", io.run_metadata(timings=res["timings"],
                                                          trial_counts=res["trial_counts"],
-                                                         seconds=seconds))
+                                                         seconds=seconds, **extra))
     io.save_npz(out / "results.npz", **res["results"]._asdict())
     io.save_json(out / "table.json", {"table": res["table"], "seconds": seconds})
     table = format_table(res["table"])

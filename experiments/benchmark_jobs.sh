@@ -1,0 +1,89 @@
+#!/bin/bash
+# The wedges benchmark's jobs on one GPU host, in stages (each resumable: a run directory under
+# $RUNS resumes after its last finished round). From the repository root:
+#   OUT=/tmp/out RUNS=/tmp/runs STAGE=tune bash experiments/benchmark_jobs.sh
+#   OUT=... RUNS=... STAGE=run OBJECTS="wedge_3 wedge_5" bash experiments/benchmark_jobs.sh
+#   OUT=... RUNS=... STAGE=rerun OBJECT=wedge_3 LEARNER=sern bash experiments/benchmark_jobs.sh
+# tune:  the confirmation screen of the selection screen's candidates, the benchmark file by the
+#        pre-registered rule, the tuning grid (five settings side by side), extensions of
+#        edge choices, and the simulator checks (time step, MJX) on the scored objects;
+# run:   one part per object (all learners, all seeds), PARALLEL parts side by side, each on
+#        its share of the cores, the parts spread over the GPUs;
+# rerun: one cell (one object, one learner, all seeds) again, with and without XLA's
+#        deterministic options, for the bit-for-bit check and the options' cost.
+# Every job's log, its host and its seconds go to $OUT/jobs.txt.
+set -uo pipefail
+: "${OUT:?}" "${RUNS:?}" "${STAGE:?}"
+mkdir -p "$OUT" "$RUNS"
+export XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
+NCPU=$(nproc); NGPU=$(nvidia-smi -L 2>/dev/null | wc -l); [ "$NGPU" -ge 1 ] || NGPU=1
+BENCH=${BENCH:-sern_jax/grasp/data/benchmarks/wedges.json}
+SCREENS=${SCREENS:-experiments/results/benchmark/screen}
+{ echo "stage $STAGE utc_start $(date -u +%FT%TZ)"; uptime; echo "cpus $NCPU"
+  lscpu | grep -E "^Model name"; nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
+  python3 -c "import jax, sys; print('python', sys.version.split()[0], 'jax', jax.__version__)"
+} >> "$OUT/jobs.txt" 2>&1
+
+job() {  # job NAME CORES GPU CMD...: one command on cores CORES and GPU GPU, timed, logged
+  local name=$1 cores=$2 gpu=$3; shift 3
+  local t0; t0=$(date +%s)
+  CUDA_VISIBLE_DEVICES=$gpu taskset -c "$cores" "$@" > "$OUT/$name.log" 2>&1
+  local rc=$?
+  echo "$name cores=$cores gpu=$gpu rc=$rc seconds=$(( $(date +%s) - t0 )) :: $*" >> "$OUT/jobs.txt"
+}
+
+share() {  # share I N: the core range of share I of N equal shares
+  local per=$(( NCPU / $2 )); echo "$(( $1 * per ))-$(( ($1 + 1) * per - 1 ))"
+}
+
+case "$STAGE" in
+tune)
+  CANDIDATES=$(python3 -m experiments.benchmark_objects candidates --select "$SCREENS/select.json")
+  job confirm "0-$((NCPU - 1))" 0 python3 -m sern_jax.commands.main grasp screen $CANDIDATES \
+    --poses 8 --trials 16 --seed 1 --json-out "$OUT/confirm.json" --no-progress
+  job objects 0 0 python3 -m experiments.benchmark_objects write --select "$SCREENS/select.json" \
+    --confirm "$OUT/confirm.json" --name wedges --out "$OUT/wedges.json"
+  [ -f "$OUT/wedges.json" ] || exit 1
+  SCORED=$(python3 -c "import json; print(','.join(o['name'] for o in json.load(open('$OUT/wedges.json'))['objects']))")
+  job checks "$(share 0 6)" 0 python3 -m experiments.trial_checks --objects "$SCORED" --poses 8 \
+    --candidates 16 --steps 2 --forces "" --mjx --out "$OUT/trial_checks.json" &
+  for i in 0 1 2 3 4; do
+    job "tune$i" "$(share $((i + 1)) 6)" $((i % NGPU)) python3 -m experiments.benchmark_tune run \
+      --benchmark "$OUT/wedges.json" --setting $i --out "$RUNS/tune" --no-progress &
+  done
+  wait
+  for ext in 1 2; do
+    python3 -m experiments.benchmark_tune choose --out "$RUNS/tune" --record "$OUT/tuning" \
+      > "$OUT/choose$ext.log" 2>&1
+    VALUES=$(python3 -c "import json; d=json.load(open('$OUT/tuning/tuned.json'))['learners']; print(','.join(f'{n}={v[\"next_value\"]}' for n, v in d.items() if v['next_value'] is not None))")
+    [ -n "$VALUES" ] || break
+    job "extend$ext" "0-$((NCPU - 1))" 0 python3 -m experiments.benchmark_tune run \
+      --benchmark "$OUT/wedges.json" --values "$VALUES" --out "$RUNS/tune" --no-progress
+  done
+  python3 -m experiments.benchmark_tune choose --out "$RUNS/tune" --record "$OUT/tuning" \
+    > "$OUT/choose.log" 2>&1
+  ;;
+run)
+  : "${OBJECTS:?}"
+  PARALLEL=${PARALLEL:-4}; i=0
+  for obj in $OBJECTS; do
+    job "part_$obj" "$(share $((i % PARALLEL)) "$PARALLEL")" $((i % NGPU)) \
+      python3 -m sern_jax.commands.main grasp learn --benchmark "$BENCH" "$obj" \
+      --out "$RUNS/$obj" --no-figures --no-progress &
+    i=$((i + 1))
+    if (( i % PARALLEL == 0 )); then wait; fi
+  done
+  wait
+  ;;
+rerun)
+  : "${OBJECT:?}" "${LEARNER:?}"
+  job "rerun_$OBJECT" "0-$((NCPU - 1))" 0 python3 -m sern_jax.commands.main grasp learn \
+    --benchmark "$BENCH" "$OBJECT" --policies "$LEARNER" --out "$RUNS/rerun_$OBJECT" \
+    --no-figures --no-progress
+  job "rerun_nondet_$OBJECT" "0-$((NCPU - 1))" 0 env SERN_GPU_NONDETERMINISTIC=1 python3 -m \
+    sern_jax.commands.main grasp learn --benchmark "$BENCH" "$OBJECT" --policies "$LEARNER" \
+    --out "$RUNS/rerun_nondet_$OBJECT" --no-figures --no-progress
+  ;;
+*) echo "STAGE must be tune, run or rerun" >&2; exit 2 ;;
+esac
+echo "stage $STAGE utc_end $(date -u +%FT%TZ)" >> "$OUT/jobs.txt"

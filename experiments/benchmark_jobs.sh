@@ -38,6 +38,12 @@ share() {  # share I N: the core range of share I of N equal shares
 
 case "$STAGE" in
 tune)
+  if [ ! -f "$SCREENS/select.json" ]; then  # the selection screen, unless already made
+    job select "0-$((NCPU - 1))" 0 python3 -m sern_jax.commands.main grasp screen \
+      $(python3 -c "from sern_jax.grasp.world import objects; print(' '.join(objects.wedge_names()))") \
+      --poses 8 --trials 8 --seed 0 --json-out "$OUT/select.json" --no-progress
+    SCREENS=$OUT
+  fi
   CANDIDATES=$(python3 -m experiments.benchmark_objects candidates --select "$SCREENS/select.json")
   job confirm "0-$((NCPU - 1))" 0 python3 -m sern_jax.commands.main grasp screen $CANDIDATES \
     --poses 8 --trials 16 --seed 1 --json-out "$OUT/confirm.json" --no-progress

@@ -51,10 +51,11 @@ tune)
     --confirm "$OUT/confirm.json" --name wedges --out "$OUT/wedges.json"
   [ -f "$OUT/wedges.json" ] || exit 1
   SCORED=$(python3 -c "import json; print(','.join(o['name'] for o in json.load(open('$OUT/wedges.json'))['objects']))")
-  job checks "$(share 0 6)" 0 python3 -m experiments.trial_checks --objects "$SCORED" --poses 8 \
+  per=$(( (NCPU - 1) / 5 ))  # five tuning settings side by side; the checks on the last core
+  job checks "$((NCPU - 1))" 0 python3 -m experiments.trial_checks --objects "$SCORED" --poses 8 \
     --candidates 16 --steps 2 --forces "" --mjx --out "$OUT/trial_checks.json" &
   for i in 0 1 2 3 4; do
-    job "tune$i" "$(share $((i + 1)) 6)" $((i % NGPU)) python3 -m experiments.benchmark_tune run \
+    job "tune$i" "$((i * per))-$(((i + 1) * per - 1))" $((i % NGPU)) python3 -m experiments.benchmark_tune run \
       --benchmark "$OUT/wedges.json" --setting $i --out "$RUNS/tune" --no-progress &
   done
   wait

@@ -14,7 +14,7 @@ own (``run --values``), until the choice is interior or two extensions were made
     python -m experiments.benchmark_tune choose --benchmark wedges --out runs/tune \\
         --record experiments/results/benchmark/tuning
 
-Each run directory (``<out>/<learner=value,...>``) resumes after its last finished round.
+Each run directory (``<out>/<learner-value_...>``) resumes after its last finished round.
 ``choose`` reads every finished run under ``--out`` and writes ``tuned.json`` (scores, choice,
 edges, the next values to run when a choice is at an edge) and ``tune_per_seed.npz`` to
 ``--record``.
@@ -47,7 +47,8 @@ _CONFIG_FIELDS = ("alpha", "epsilon", "alpha0", "p")  # OnlineConfig's own field
 
 
 def _label(values: dict) -> str:
-    return ",".join(f"{n}={values[n]:g}" for n in sorted(values))
+    """The run directory's name: letters, digits, '.', '_' and '-' only."""
+    return "_".join(f"{n}-{values[n]:g}" for n in sorted(values))
 
 
 def _config(bench, values: dict, seeds: int):

@@ -7,7 +7,8 @@ with their defaults, in one process (used to make ``sern_jax/grasp/data/`` on on
 
 The manifest it leaves in ``OUT/theta0`` also records how it was made: this command, the
 equivalent ``sern grasp`` commands, the seeds, the machine, the simulated world
-(``sim.physics_settings()``: the gripper and the trial) and the seconds of each step.
+(``sim.physics_settings()``: the gripper and the trial) and the seconds of each step, beside
+the sha256 of θ0 and of the screen (``artifacts.save_screen``), which loading checks.
 """
 
 from __future__ import annotations
@@ -84,9 +85,9 @@ def main(argv=None) -> int:
     host = io.run_metadata()["host"]
     screen_settings = {"poses": args.screen_poses, "trials": args.screen_trials,
                        "fresh_trials": args.fresh_trials or args.screen_trials, "seed": 0}
-    io.save_json(out / "theta0" / "screen.json", {"rule": pretrain.HARD_RULE, "objects": rows,
-                                                   "settings": screen_settings,
-                                                   "timings": timings, "machine": host})
+    artifacts.save_screen(out / "theta0", {"rule": pretrain.HARD_RULE, "objects": rows,
+                                           "settings": screen_settings, "timings": timings,
+                                           "machine": host})  # its sha256 into the manifest
     for r in rows:
         print(f"{r['object']:>20s} greedy {r['greedy_success']:.2f} best {r['best_success']:.2f} "
               f"best fresh {r['best_success_fresh']:.2f} mean {r['mean_success']:.2f} "
@@ -97,7 +98,8 @@ def main(argv=None) -> int:
 
 
 def _record(theta_dir: Path, argv, args, summary, timings, screen_settings, host) -> None:
-    """Adds how the artefacts were made to the manifest (θ0's sha256 is unchanged)."""
+    """Adds how the artefacts were made to the manifest (the digests of θ0 and the screen
+    are kept)."""
     import sys
 
     import jax

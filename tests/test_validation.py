@@ -239,17 +239,24 @@ def test_local_ray_binds_to_loopback(monkeypatch):
     calls = {}
 
     class FakeRay:
+        class _private:  # noqa: N801 - ray._private
+            class ray_constants:  # noqa: N801 - its switch that keeps a loopback node address
+                ENABLE_RAY_CLUSTER = True
+
         @staticmethod
         def is_initialized():
             return False
 
         @staticmethod
         def init(**kwargs):
-            calls.update(kwargs)
+            calls.update(kwargs, cluster=FakeRay._private.ray_constants.ENABLE_RAY_CLUSTER)
 
     assert distributed._init(FakeRay, distributed.RayConfig()) is True
     assert calls["_node_ip_address"] == "127.0.0.1" and calls["address"] == "local"
+    assert calls["cluster"] is False  # loopback is kept while it starts (Ray 2.60 would
+    assert FakeRay._private.ray_constants.ENABLE_RAY_CLUSTER is True  # resolve it), restored
     assert calls["logging_level"] >= 40  # errors only: Ray's warnings stay off the terminal
+    # (tests/infra/test_ray_network.py starts a real one and reads its listening sockets)
 
 
 # ----------------------------------------------------------------------------- other commands
@@ -354,9 +361,87 @@ def test_screen_json_of_the_wrong_shape_is_one_line(tmp_path, screen):
     from sern_jax.grasp.model import artifacts
 
     d = _theta0_copy(tmp_path)
-    (d / "screen.json").write_text(json.dumps(screen))
-    with pytest.raises(ValueError, match="screen.json"):
+    artifacts.save_screen(d, screen)  # its digest recorded: the schema is what refuses it
+    with pytest.raises(ValueError, match="screen.json") as info:
         artifacts.load_theta0(d)
+    assert "\n" not in str(info.value) and "sha256" not in str(info.value)
+
+
+def test_shipped_manifest_carries_the_digest_of_the_screen():
+    import hashlib
+
+    from sern_jax.grasp.model import artifacts
+
+    manifest = json.loads((artifacts.DATA_DIR / artifacts.MANIFEST_FILE).read_text())
+    blob = (artifacts.DATA_DIR / artifacts.SCREEN_FILE).read_bytes()
+    assert manifest["screen_sha256"] == hashlib.sha256(blob).hexdigest()
+
+
+def _edited_screen(d: Path) -> None:
+    """One success rate of the screen changed: still valid JSON of the right shape."""
+    screen = json.loads((d / "screen.json").read_text())
+    screen["objects"][0]["greedy_success"] = 1.0 - screen["objects"][0]["greedy_success"]
+    (d / "screen.json").write_text(json.dumps(screen, indent=2))
+
+
+def test_an_edited_screen_is_refused(tmp_path):
+    from sern_jax.grasp.model import artifacts
+
+    d = _theta0_copy(tmp_path)
+    _edited_screen(d)
+    with pytest.raises(ValueError, match=r"^--theta0 .*screen\.json does not match its "
+                                         r"manifest") as info:
+        artifacts.load_theta0(d)
+    assert "\n" not in str(info.value)
+
+
+def test_a_screen_without_a_digest_is_refused(tmp_path, monkeypatch, capsys):
+    from sern_jax.grasp.model import artifacts
+
+    d = _theta0_copy(tmp_path)
+    manifest = json.loads((d / "manifest.json").read_text())
+    del manifest["screen_sha256"]
+    (d / "manifest.json").write_text(json.dumps(manifest))
+    _edited_screen(d)
+    with pytest.raises(ValueError, match="^--theta0 .*screen_sha256"):
+        artifacts.load_theta0(d)
+    line = _refused(["grasp", "screen", "box", "--theta0", str(d)], tmp_path, monkeypatch,
+                    capsys, f"--theta0 {d}")
+    assert "screen_sha256" in line
+    (d / "screen.json").unlink()  # no screen: nothing to vouch for, loads
+    assert artifacts.load_theta0(d).screen is None
+
+
+def test_a_recorded_screen_that_is_missing_is_refused(tmp_path):
+    from sern_jax.grasp.model import artifacts
+
+    d = _theta0_copy(tmp_path)
+    (d / "screen.json").unlink()
+    with pytest.raises(ValueError, match="screen.json is missing"):
+        artifacts.load_theta0(d)
+
+
+def test_save_screen_and_install_record_the_digest(tmp_path):
+    from sern_jax.grasp.model import artifacts
+
+    d = _theta0_copy(tmp_path)
+    screen = json.loads((d / "screen.json").read_text())
+    screen["objects"] = screen["objects"][:3]
+    artifacts.save_screen(d, screen)
+    assert artifacts.load_theta0(d).screen == screen
+    # a pretrain directory whose screen was written beside it without a digest: install
+    # records the digest of the screen it installs
+    manifest = json.loads((d / "manifest.json").read_text())
+    del manifest["screen_sha256"]
+    (d / "manifest.json").write_text(json.dumps(manifest))
+    dst = artifacts.install(d, tmp_path / "dst")
+    assert artifacts.load_theta0(dst).screen == screen
+    # a source whose screen does not match its recorded digest is not installed
+    artifacts.save_screen(d, screen)
+    _edited_screen(d)
+    with pytest.raises(ValueError, match="does not match its manifest"):
+        artifacts.install(d, tmp_path / "dst2")
+    assert not (tmp_path / "dst2").exists()
 
 
 def test_screen_with_a_missing_theta0_names_the_flag(tmp_path, monkeypatch, capsys):
@@ -439,6 +524,40 @@ def test_a_loser_never_removes_the_winners_directory(tmp_path):
         holder.kill()
         holder.wait()
     io.refuse_if_locked(run)  # released by the kernel
+
+
+def test_a_loser_that_created_the_directory_never_removes_it(tmp_path, monkeypatch):
+    """The race of two runs started at the same instant, made exact: this process creates
+    the directory, and the other takes its lock right before this process's ``flock``. The
+    loser is refused and leaves the winner's directory (and lock) alone."""
+    import fcntl
+
+    run = tmp_path / "run"
+    real_flock = fcntl.flock
+    holders = []
+
+    def flock(fd, op):
+        if not holders:  # the winner locks between this process's mkdir and its flock
+            holders.append(subprocess.Popen(
+                [sys.executable, "-c", "import sys, time\nfrom sern_jax.infra import "
+                 "validate\nwith validate.locked_run_dir(sys.argv[1]):\n"
+                 "    print('locked', flush=True)\n    time.sleep(60)\n", str(run)],
+                stdout=subprocess.PIPE, text=True, cwd=ROOT))
+            assert holders[0].stdout.readline().strip() == "locked"
+        return real_flock(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    try:
+        with pytest.raises(io.RunLockedError), validate.locked_run_dir(run):
+            pass
+        assert holders and (run / io.LOCK_FILE).exists()  # the winner's directory is kept
+        monkeypatch.setattr(fcntl, "flock", real_flock)
+        with pytest.raises(io.RunLockedError), io.run_lock(run):  # and still locked
+            pass
+    finally:
+        for holder in holders:
+            holder.kill()
+            holder.wait()
 
 
 def test_a_lock_on_a_removed_directory_is_taken_again(tmp_path, monkeypatch):

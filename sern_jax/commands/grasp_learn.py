@@ -222,7 +222,7 @@ def _run_pretrain(args) -> int:
     specs = [objects.make_object(n) for n in objects.object_names()]
     rows = pretrain.screen(theta0.network, theta0.params, specs, args.screen_poses,
                            args.screen_trials, progress=not args.no_progress)
-    io.save_json(Path(args.out) / "screen.json", {"rule": pretrain.HARD_RULE, "objects": rows})
+    artifacts.save_screen(args.out, {"rule": pretrain.HARD_RULE, "objects": rows})
     _print_screen(rows)
     print(json.dumps(manifest["heldout"] | {"objects": None}, indent=2))
     if args.install:

@@ -32,13 +32,15 @@ the same unit (a retry after a lost reply) write the same bytes.
 Ray stays optional: importing this module does not import ray; :func:`require_ray` does, and
 turns a missing installation into one line naming ``--ray`` and the ``[ray]`` extra.
 
-``--ray ADDRESS`` is tried before anything is written: :func:`from_args` opens a TCP
+``--ray ADDRESS`` is joined before anything is written: :func:`from_args` opens a TCP
 connection to the address with a bound of :data:`CONNECT_TIMEOUT_S` seconds and refuses an
-address nobody answers at in one line naming ``--ray``. The local Ray that ``--ray`` starts
-takes loopback (``127.0.0.1``) as its node address, so its nodes and workers talk over
-loopback only; Ray 2.60's gRPC servers still listen on every interface (Ray has no setting
-that binds them), which token authentication guards. Ray's own log lines stay out of the
-terminal (errors only).
+address nobody answers at in one line naming ``--ray``; then :func:`join` gives Ray
+:data:`JOIN_TIMEOUT_S` seconds to join the cluster there, and a watchdog ends the process in
+one line when it does not (or on SIGTERM, which Ray's connection loop would hold up). The
+local Ray that ``--ray`` starts keeps loopback (``127.0.0.1``) as its node address
+(:func:`_loopback_node`), so every server it starts (GCS, raylet, object manager, workers,
+agents) listens on loopback only. Ray's own log lines stay out of the terminal (errors
+only).
 
 Security: Ray 2.60 turns token authentication on by default. Keep it on, and never expose a
 head node's ports: anyone who reaches an open Ray head can run code on every node
@@ -65,6 +67,7 @@ __all__ = [
     "add_arguments",
     "check_backend",
     "from_args",
+    "join",
     "require_ray",
     "worker_env",
     "run_units",
@@ -73,6 +76,7 @@ __all__ = [
 LOCAL = "local"  # --ray without an address: start a Ray on this machine
 EXTRA = "pip install -e '.[ray]'"
 CONNECT_TIMEOUT_S = 10.0  # --ray ADDRESS: seconds the address has to answer
+JOIN_TIMEOUT_S = 30.0  # --ray ADDRESS: seconds Ray then has to join the cluster there
 LOOPBACK = "127.0.0.1"  # the local Ray's node address
 
 
@@ -159,7 +163,8 @@ def add_arguments(parser, *, gpus_default: float = 0.0) -> None:
              f"{EXTRA}); no ADDRESS starts a local Ray (node address 127.0.0.1), 'auto' "
              "joins the cluster started on this machine with `ray start`, host:port another "
              "one; an "
-             f"address that does not answer within {CONNECT_TIMEOUT_S:g} s is refused before "
+             f"address that does not answer within {CONNECT_TIMEOUT_S:g} s, or where Ray "
+             f"does not join a cluster within {JOIN_TIMEOUT_S:g} s more, is refused before "
              "anything is written; same run directory and results as without --ray")
     parser.add_argument("--ray-workers", type=validate.int_in(1, 1_000_000), default=None,
                         metavar="N",
@@ -179,6 +184,10 @@ def from_args(args) -> RayConfig | None:
 
     Raises ValueError (one line naming the flag) for a bad value, a companion flag given
     without ``--ray``, or ``--ray`` when ray is not installed; imports ray only to check that.
+    ``--ray ADDRESS`` joins the cluster here, before the command writes anything: the address
+    must answer within :data:`CONNECT_TIMEOUT_S` seconds (:func:`probe`), and Ray must join
+    it within :data:`JOIN_TIMEOUT_S` more (:func:`join`, which otherwise ends the process in
+    one line).
     """
     address = getattr(args, "ray", None)
     if address is None:
@@ -196,6 +205,7 @@ def from_args(args) -> RayConfig | None:
     ray = require_ray()
     if config.address != LOCAL and not ray.is_initialized():
         probe(ray, config.address)
+        join(ray, config.address)  # before anything is written: bounded, or one line
     return config
 
 
@@ -436,20 +446,128 @@ def _init(ray, config: RayConfig) -> bool:
     """Connects to (or starts) Ray; True when this call started it (and must stop it)."""
     if ray.is_initialized():
         return False
-    kwargs: dict[str, Any] = dict(logging_level=logging.ERROR, log_to_driver=True,
-                                  configure_logging=True)
     if config.address == LOCAL:
         cpus = None if config.workers is None else config.workers * config.cpus_per_task
-        ray.init(address="local", num_cpus=cpus, include_dashboard=False,
-                 _node_ip_address=LOOPBACK, **kwargs)
+        with _loopback_node(ray):
+            ray.init(address="local", num_cpus=cpus, include_dashboard=False,
+                     _node_ip_address=LOOPBACK, **_INIT_KWARGS)
     else:
-        try:
-            ray.init(address=config.address, **kwargs)
-        except (ConnectionError, RuntimeError, ValueError) as exc:  # no cluster there
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-            raise ValueError(f"--ray {config.address}: cannot join a Ray cluster there "
-                             f"({_one_line(first, 160)})") from None
+        join(ray, config.address)
     return True
+
+
+_INIT_KWARGS: dict[str, Any] = dict(logging_level=logging.ERROR, log_to_driver=True,
+                                    configure_logging=True)
+
+
+@contextlib.contextmanager
+def _loopback_node(ray):
+    """The local Ray's node address stays loopback while it starts, so every server it starts
+    listens on 127.0.0.1 only.
+
+    Ray 2.60 turns a loopback ``_node_ip_address`` into this machine's network address
+    (``ray._private.services.resolve_ip_for_localhost``), and its servers then listen on
+    every interface (its gRPC servers bind 127.0.0.1 only when the node address is
+    127.0.0.1). It keeps loopback where ``ray._private.ray_constants.ENABLE_RAY_CLUSTER`` is
+    off (its default on macOS and Windows): switched off here while ``ray.init`` starts the
+    node, then restored. The processes it starts take the node address from their command
+    line, so the switch matters only in this process."""
+    constants = getattr(getattr(ray, "_private", None), "ray_constants", None)
+    if constants is None or not hasattr(constants, "ENABLE_RAY_CLUSTER"):
+        yield
+        return
+    previous = constants.ENABLE_RAY_CLUSTER
+    constants.ENABLE_RAY_CLUSTER = False
+    try:
+        yield
+    finally:
+        constants.ENABLE_RAY_CLUSTER = previous
+
+
+def join(ray, address: str, timeout: float = JOIN_TIMEOUT_S) -> None:
+    """``ray.init(address=address)`` within ``timeout`` seconds, or the process ends in one
+    line naming ``--ray``.
+
+    Ray retries a cluster address that accepts connections but does not answer as Ray for
+    minutes, inside C++ code that holds the main thread: no Python exception can stop it, and
+    a SIGTERM waits for it. So a watchdog thread ends the process (``os._exit``) with one line
+    on stderr: exit 2 after ``timeout`` seconds, 128 + N on SIGINT or SIGTERM (seen through
+    ``signal.set_wakeup_fd``, which Python's C-level signal handler writes at once).
+    :func:`from_args` calls it before anything is written, so ending the process leaves
+    nothing behind. Ray's own lines (C++ warnings written to file descriptor 2) stay out of
+    the terminal while it connects.
+
+    Raises:
+      ValueError: one line naming ``--ray`` when Ray refuses the address.
+    """
+    import select
+    import signal
+    import sys
+    import threading
+
+    stop = {int(signal.SIGINT), int(signal.SIGTERM)}
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    done, lock = threading.Event(), threading.Lock()
+    sys.stderr.flush()
+    terminal = os.dup(2)
+
+    def end(line: str, code: int) -> None:
+        with lock:
+            if done.is_set():
+                return
+            os.write(terminal, (line + "\n").encode())
+            os._exit(code)
+
+    def watch() -> None:
+        deadline = time.monotonic() + timeout
+        while not done.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                end(f"--ray {address}: Ray did not join a cluster there within {timeout:g} "
+                    "s; check the host and port (a Ray head's GCS port, 6379 by default), that "
+                    "the cluster runs and that this machine may join it", 2)
+                return
+            if select.select([read_fd], [], [], left)[0]:
+                with contextlib.suppress(OSError):
+                    for signum in os.read(read_fd, 64):
+                        if signum in stop:
+                            end(f"--ray {address}: stopped by {signal.Signals(signum).name} "
+                                "while joining the Ray cluster", 128 + signum)
+
+    def ignore(signum, frame):  # the watchdog ends the process (set_wakeup_fd)
+        pass
+
+    main = threading.current_thread() is threading.main_thread()
+    previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False) if main else None
+    previous_term = signal.signal(signal.SIGTERM, ignore) if main else None
+    quiet = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(quiet, 2)
+    os.close(quiet)
+    watchdog = threading.Thread(target=watch, name="sern-ray-join", daemon=True)
+    watchdog.start()
+    try:
+        ray.init(address=address, **_INIT_KWARGS)
+    except (ConnectionError, RuntimeError, ValueError) as exc:  # no cluster there
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"--ray {address}: cannot join a Ray cluster there "
+                         f"({_one_line(first, 160)})") from None
+    finally:
+        with lock:
+            done.set()
+        with contextlib.suppress(OSError):
+            os.write(write_fd, b"\0")  # wakes the watchdog
+        watchdog.join()
+        sys.stderr.flush()
+        os.dup2(terminal, 2)
+        os.close(terminal)
+        if main:
+            signal.set_wakeup_fd(previous_fd)
+            if signal.getsignal(signal.SIGTERM) is ignore:  # (Ray's own handler stays)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL if previous_term is None
+                              else previous_term)
+        os.close(read_fd)
+        os.close(write_fd)
 
 
 def _check_feasible(ray, config: RayConfig) -> None:

@@ -8,7 +8,15 @@
   the ablation, k crops chosen uniformly at random (``random_*``), each with grasp depth and
   label, stored as float16 crops (a few hundred kB);
 * ``manifest.json``: how they were made (command, seed, commit, D0 size, training settings,
-  held-out metrics, the network config), so anyone can regenerate them.
+  held-out metrics, the network config), so anyone can regenerate them, and the sha256 of
+  ``theta0.msgpack`` (``theta0_sha256``) and of ``screen.json`` (``screen_sha256``);
+* ``screen.json``: the hard-set screen made with this θ0 (:func:`save_screen` writes it and
+  records its digest).
+
+Every file is checked when read: θ0 and the screen against the manifest's digests, the core
+sets against the digest their archive carries (``io.load_npz``). A θ0 directory whose manifest
+lacks the digest of a file it holds is refused, as a damaged one is: its contents could not
+be checked.
 
 :func:`load_theta0` reads them (cached); a user needs no pretraining to start.
 """
@@ -18,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import json
 from pathlib import Path
 from typing import NamedTuple
 
@@ -32,6 +41,8 @@ __all__ = [
     "DATA_DIR",
     "Theta0",
     "save",
+    "save_screen",
+    "check_screen_digest",
     "load_theta0",
     "core_set_data",
     "CORE_SET_KINDS",
@@ -87,17 +98,51 @@ def read_manifest(path: str | Path) -> dict:
     """A θ0 ``manifest.json``, checked against its schema: a JSON object whose
     ``network_config`` is an object and whose ``theta0_sha256`` is the 64-hex-digit digest
     of ``theta0.msgpack`` (every θ0 carries one; a manifest without it is refused, as its
-    weights could not be checked). One line naming the file otherwise (``ValueError``)."""
+    weights could not be checked), as ``screen_sha256`` is of ``screen.json`` where there is
+    one (:func:`check_screen_digest`). One line naming the file otherwise (``ValueError``)."""
     from sern_jax.infra import validate
 
     manifest = validate.read_json_object(
         path, {"network_config": dict, "theta0_sha256": str}, what="θ0 manifest",
         advice=_RESTORE)
-    digest = manifest["theta0_sha256"]
-    if len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest):
-        raise ValueError(f"{path}: 'theta0_sha256' is not a sha256 digest (a damaged θ0 "
-                         f"manifest); {_RESTORE}")
+    _sha256_field(manifest, "theta0_sha256", path)
+    _sha256_field(manifest, "screen_sha256", path)
     return manifest
+
+
+def _sha256_field(manifest: dict, key: str, path) -> str | None:
+    """``manifest[key]`` when it is a sha256 digest (64 lower-case hex digits), None when
+    absent; one line naming the file otherwise."""
+    digest = manifest.get(key)
+    if digest is None:
+        return None
+    if not isinstance(digest, str) or len(digest) != 64 or \
+            any(c not in "0123456789abcdef" for c in digest):
+        raise ValueError(f"{path}: {key!r} is not a sha256 digest (a damaged θ0 manifest); "
+                         f"{_RESTORE}")
+    return digest
+
+
+def check_screen_digest(root: str | Path, manifest: dict) -> bool:
+    """Checks ``root/screen.json`` against the manifest's ``screen_sha256``; True when the
+    directory holds a screen. A screen without a recorded digest, a digest without its screen,
+    or a screen whose bytes do not match is one line naming the file (``ValueError``)."""
+    root = Path(root)
+    digest = _sha256_field(manifest, "screen_sha256", root / MANIFEST_FILE)
+    path = root / SCREEN_FILE
+    if not path.exists():
+        if digest is not None:
+            raise ValueError(f"{path} is missing, but {root / MANIFEST_FILE} records its "
+                             f"sha256; {_RESTORE}")
+        return False
+    if digest is None:
+        raise ValueError(f"{path}: {root / MANIFEST_FILE} has no 'screen_sha256', so the "
+                         f"screen cannot be checked (a damaged θ0 directory); {_RESTORE}")
+    actual = hashlib.sha256(path.read_bytes()).hexdigest()
+    if actual != digest:
+        raise ValueError(f"{path} does not match its manifest (sha256 {actual[:16]} != "
+                         f"{digest[:16]}); {_RESTORE}")
+    return True
 
 
 def read_screen(path: str | Path) -> dict:
@@ -151,6 +196,21 @@ def save(
     return out_dir
 
 
+def save_screen(theta_dir: str | Path, screen: dict) -> Path:
+    """Writes ``screen`` as ``theta_dir/screen.json`` and records its sha256 in the
+    directory's manifest (``screen_sha256``), each atomically; returns the screen's path.
+    (A crash between the two leaves a screen the manifest does not vouch for: refused on
+    load, until the screen is written again.)"""
+    theta_dir = Path(theta_dir)
+    path = theta_dir / SCREEN_FILE
+    io.save_json(path, screen)
+    manifest = read_manifest(theta_dir / MANIFEST_FILE)
+    manifest["screen_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    io.save_json(theta_dir / MANIFEST_FILE, manifest)
+    _load.cache_clear()
+    return path
+
+
 @functools.lru_cache(maxsize=4)
 def _load(path: str) -> Theta0:
     from flax import serialization
@@ -178,7 +238,7 @@ def _load(path: str) -> Theta0:
     params = jax.tree.map(jnp.asarray, params)
     core = io.load_npz(root / CORE_FILE, advice="restore it (reinstall sern_jax, or rerun "
                        "`sern grasp pretrain --install`), or pass another --theta0")
-    screen = read_screen(root / SCREEN_FILE) if (root / SCREEN_FILE).exists() else None
+    screen = read_screen(root / SCREEN_FILE) if check_screen_digest(root, manifest) else None
     return Theta0(network, params, core, manifest, digest[:16], screen)
 
 
@@ -211,14 +271,30 @@ def core_set_data(kind: str, theta0: Theta0) -> qn.TrainData:
 
 def install(src_dir: str | Path, dst_dir: str | Path = DATA_DIR) -> Path:
     """Copies θ0, the core sets, the manifest and the screen from a pretrain run directory
-    into ``dst_dir`` (default: the package data that ``load_theta0()`` reads)."""
+    into ``dst_dir`` (default: the package data that ``load_theta0()`` reads).
+
+    The installed manifest carries the screen's sha256: the source's, checked against its
+    screen, or, where the source manifest has none (a screen written by the pretrain run
+    beside it), the digest of the screen installed. The installed directory is then loaded
+    (every digest checked) before this returns."""
     src, dst = Path(src_dir), Path(dst_dir)
     missing = [f for f in FILES if not (src / f).exists()]
     if missing:
         raise ValueError(f"{src} lacks {', '.join(missing)}: run `sern grasp pretrain` first")
+    blobs = {f: (src / f).read_bytes() for f in FILES}
+    manifest = read_manifest(src / MANIFEST_FILE)
+    if hashlib.sha256(blobs[THETA0_FILE]).hexdigest() != manifest["theta0_sha256"]:
+        raise ValueError(f"{src / THETA0_FILE} does not match its manifest; nothing installed")
+    if manifest.get("screen_sha256") is None:
+        manifest["screen_sha256"] = hashlib.sha256(blobs[SCREEN_FILE]).hexdigest()
+        blobs[MANIFEST_FILE] = (json.dumps(io.to_jsonable(manifest), indent=2) +
+                                "\n").encode()
+    else:
+        check_screen_digest(src, manifest)
     for f in FILES:
-        io.save_bytes(dst / f, (src / f).read_bytes())
+        io.save_bytes(dst / f, blobs[f])
     _load.cache_clear()
+    _load(str(dst))
     return dst
 
 

@@ -494,10 +494,25 @@ def main(argv=None) -> int:
     p_pow.add_argument("--power", type=validate.float_in(0.0, 1.0, low_open=True,
                                                          high_open=True), default=0.8)
     p_pow.add_argument("--json-out", default=None)
+    p_re = sub.add_parser("rerun-check", help="compare a rerun of one cell with its part, "
+                                              "bit for bit")
+    p_re.add_argument("--part", required=True, help="the committed part's run directory")
+    p_re.add_argument("--rerun", nargs="+", required=True, metavar="RUN_DIR",
+                      help="run directories of the same object with some of its learners")
+    p_re.add_argument("--json-out", default=None)
     args = parser.parse_args(argv)
     try:
         if args.what == "power":
             return _power(args)
+        if args.what == "rerun-check":
+            validate.out_file(args.json_out, "--json-out")
+            report = rerun_check(Path(args.part), [Path(r) for r in args.rerun])
+            print(json.dumps(report, indent=1))
+            if args.json_out:
+                from sern_jax.infra import io
+
+                io.save_json(args.json_out, report)
+            return 0
         validate.out_dir(args.out, "--out")
         if args.runs is None:
             for flag, value in (("--screen", args.screen), ("--benchmark", args.benchmark)):
@@ -515,6 +530,39 @@ def main(argv=None) -> int:
     _print_summary(s)
     print(f"wrote {Path(args.out) / 'summary.json'}")
     return 0
+
+
+_RESULT_FIELDS = ("lowvar_eval", "paper_eval", "explore_success", "explore_action",
+                  "pseudo_regret")
+
+
+def rerun_check(part: Path, reruns: list[Path]) -> dict:
+    """Each rerun's arrays against the part's, learner by learner: the cells that differ
+    (NaN placeholders compared as equal) and the run seconds of each."""
+    ref = _read_part(part)
+    ref_arrays = np.load(part / "results.npz")
+    report = {"part": str(part), "reruns": []}
+    for rerun in reruns:
+        other = _read_part(rerun)
+        if other["objects"] != ref["objects"]:
+            raise ValueError(f"--rerun {rerun}: objects {other['objects']} are not the part's "
+                             f"{ref['objects']}")
+        arrays = np.load(rerun / "results.npz")
+        meta = json.loads((rerun / "metadata.json").read_text())
+        rows = {}
+        for q, name in enumerate(other["config"]["policies"]):
+            qr = list(ref["config"]["policies"]).index(name)
+            diff = {}
+            for f in _RESULT_FIELDS:
+                a, b = ref_arrays[f][:, :, qr], arrays[f][:, :, q]
+                same = (a == b) | (np.isnan(a) & np.isnan(b)) if a.dtype.kind == "f" else a == b
+                diff[f] = {"cells": int(same.size), "differ": int((~same).sum())}
+            rows[name] = diff
+        report["reruns"].append({"run": str(rerun), "seconds": meta.get("seconds"),
+                                 "env": meta.get("env"), "learners": rows,
+                                 "identical": all(d["differ"] == 0 for r in rows.values()
+                                                  for d in r.values())})
+    return report
 
 
 def _power(args) -> int:

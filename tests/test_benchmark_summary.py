@@ -5,6 +5,7 @@ in one line naming the flag with nothing written; the figures and the docs' tabl
 from the summary."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -232,3 +233,21 @@ def test_figures_and_doc_tables_build_from_the_summary(world, tmp_path):
     assert "`o3` | 70.0 | 90.0 | 8 × 16 | 8 × 16 | no" in screen
     # the builders are not registered blocks until a page marks them
     assert "benchmark-leaderboard" not in dt.BLOCKS
+
+
+def test_rerun_check_finds_equal_cells_equal_and_a_changed_cell(world, tmp_path):
+    part = world["parts"][0]
+    same = tmp_path / "same"
+    shutil.copytree(part, same)
+    arrays = {k: v for k, v in np.load(part / "results.npz").items() if k != io.DIGEST_KEY}
+    arrays["lowvar_eval"][2, 1, 0, 3] += 1 / 8  # one cell of sern
+    changed = tmp_path / "changed"
+    shutil.copytree(part, changed)
+    io.save_npz(changed / "results.npz", **arrays)
+    report = bm.rerun_check(part, [same, changed])
+    assert report["reruns"][0]["identical"]
+    assert not report["reruns"][1]["identical"]
+    assert report["reruns"][1]["learners"]["sern"]["lowvar_eval"]["differ"] == 1
+    assert report["reruns"][1]["learners"]["greedy"]["lowvar_eval"]["differ"] == 0
+    with pytest.raises(ValueError, match="not the part's"):
+        bm.rerun_check(part, [world["parts"][1]])

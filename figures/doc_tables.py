@@ -1502,6 +1502,88 @@ def benchmark_screen(summary: dict | None = None) -> str:
                   "screen poses × trials", "fresh poses × trials", "passes the rule"], rows)
 
 
+def _bench_record(name: str) -> dict:
+    return json.loads((RESULTS / "benchmark" / name).read_text())
+
+
+@block("benchmark-objects")
+def benchmark_objects() -> str:
+    """The qualified wedges: both screens' figures, shape and role (scored or tuning)."""
+    bench = json.loads((ROOT / "sern_jax" / "grasp" / "data" / "benchmarks" /
+                        "wedges.json").read_text())
+    select = {r["object"]: r for r in _bench_record("screen/select.json")["objects"]}
+    confirm = {r["object"]: r for r in _bench_record("screen/confirm.json")["objects"]}
+    rows = []
+    for role, entries in (("scored", bench["objects"]), ("tuning", bench["tuning_objects"])):
+        for e in entries:
+            p, a, b = e["params"], select[e["name"]], confirm[e["name"]]
+            rows.append([f"`{e['name']}`", role, p["section"], f"{p['base_angle']:.0f}°",
+                         f"{100 * p['length']:.1f} cm", pct(a["greedy_success"], 0),
+                         pct(a["best_success_fresh"], 0), pct(b["greedy_success"], 0),
+                         pct(b["best_success_fresh"], 0)])
+    return table(["object", "role", "section", "face angle", "length",
+                  "selection: θ0 greedy", "selection: best, fresh",
+                  "confirmation: θ0 greedy", "confirmation: best, fresh"], rows)
+
+
+def _span(ci) -> str:
+    return f"[{_num(100 * ci[0], 1, False)}, {_num(100 * ci[1], 1, False)}] %"
+
+
+@block("benchmark-screens")
+def benchmark_screens() -> str:
+    """The two screens in numbers: candidates, qualified, sections, θ0 by section."""
+    from sern_jax.grasp.world import objects
+
+    select = _bench_record("screen/select.json")
+    confirm = _bench_record("screen/confirm.json")
+    section = {r["object"]: objects.wedge_params(int(r["object"].split("_")[1]))["section"]
+               for r in select["objects"]}
+    hard = [r["object"] for r in select["objects"] if r["hard"]]
+    tri = sum(section[o] == "triangle" for o in hard)
+    greedy = {k: [r["greedy_success"] for r in select["objects"] if section[r["object"]] == k]
+              for k in ("triangle", "trapezoid")}
+    qualified = sum(r["hard"] for r in confirm["objects"])
+    ps, pc = select["objects"][0], confirm["objects"][0]
+    return (f"* selection: all {len(select['objects'])} members, {ps['poses']} poses × "
+            f"{ps['trials']} trials (seed 0): {len(hard)} meet the rule, {tri} of "
+            f"them triangles (the trapezoids' flat tops give θ0 a box-like grasp: its greedy "
+            f"success averages {pct(np.mean(greedy['trapezoid']), 0)} on them, against "
+            f"{pct(np.mean(greedy['triangle']), 0)} on the triangles);\n"
+            f"* confirmation: the {len(confirm['objects'])} candidates on new poses and trials, "
+            f"{pc['poses']} poses × {pc['trials']} trials (seed 1): {qualified} meet "
+            f"the rule again.")
+
+
+@block("benchmark-checks")
+def benchmark_checks() -> str:
+    """The simulator checks on the scored objects (paired trials)."""
+    c = _bench_record("screen/trial_checks.json")
+    dt, mjx = c["timestep"]["5ms_vs_2.5ms"], c["mjx"]
+    return table(["check", "paired trials", "same outcome", "95 % interval (Clopper–Pearson)",
+                  "success rates"],
+                 [["time step 5 ms vs 2.5 ms", str(dt["n"]), pct(dt["fraction"]),
+                   _span(dt["ci95"]),
+                   " vs ".join(pct(v) for v in c["timestep"]["success"].values())],
+                  ["native MuJoCo vs MJX (one program)", str(mjx["n"]), pct(mjx["fraction"]),
+                   _span(mjx["ci95"]),
+                   f"{pct(mjx['success']['native'])} vs {pct(mjx['success']['mjx'])}"]])
+
+
+@block("benchmark-tuning")
+def benchmark_tuning() -> str:
+    """Each learner's knob: the values tried, the scores, the choice."""
+    t = _bench_record("tuning/tuned.json")
+    rows = []
+    for name, v in t["learners"].items():
+        tried = ", ".join(f"**{x:g}**" if x == v["chosen"] else f"{x:g}" for x in v["values"])
+        best = max(v["scores"])
+        rows.append([f"`{name}`", v["field"], tried, pct(best),
+                     "at the edge (two extensions made)" if v["edge"] else "interior"])
+    return table(["learner", "knob", "values tried (chosen in bold)", "best score",
+                  "choice"], rows)
+
+
 # ----------------------------------------------------------------------------- pages
 
 

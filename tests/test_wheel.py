@@ -65,7 +65,8 @@ def test_wheel_adds_only_sern_jax_and_ships_theta0(wheel):
     assert tops == {"sern_jax", wheel.name.split("-py3")[0] + ".dist-info"}, tops
     for folder in ("experiments", "figures", "proofs_check", "commands", "grasp", "learners"):
         assert f"sern_jax/{folder}/__init__.py" in names, folder
-    for data in ("theta0.msgpack", "core_set.npz", "manifest.json", "screen.json"):
+    for data in ("theta0.msgpack", "core_set.npz", "manifest.json", "screen.json",
+                 "benchmarks/wedges.json"):
         assert f"sern_jax/grasp/data/{data}" in names, data
 
 
@@ -107,3 +108,18 @@ def test_installed_tiny_grasp_learn_on_the_shipped_theta0(installed):
     shipped = _run([python, "-c", "from sern_jax.grasp.model import artifacts; "
                     "print(artifacts.load_theta0().fingerprint)"], cwd=work, env=env).stdout
     assert config["theta0"] == shipped.strip()
+
+
+def test_installed_benchmark_runs_one_part_briefly(installed):
+    """The shipped benchmark file travels in the wheel and a learner runs on it from a fresh
+    install (one object, two seeds, one round: the done-when command of the benchmark)."""
+    python, sern, env, work = installed
+    out = work / "bench-run"
+    _run([sern, "grasp", "learn", "--benchmark", "wedges", "wedge_0", "--policies", "greedy",
+          "--seeds", "2", "--rounds", "1", "--no-progress", "--no-figures", "--out", out],
+         cwd=work, env=env)
+    config = json.loads((out / "config.json").read_text())
+    assert config["benchmark"]["name"] == "wedges"
+    results = _run([python, "-c", "import numpy as np, sys; r = np.load(sys.argv[1]); "
+                    "print(r['lowvar_eval'].shape)", out / "results.npz"], cwd=work, env=env)
+    assert results.stdout.strip() == "(2, 1, 1, 2)"

@@ -3,7 +3,7 @@ learn`` (or a ``sern regret``) twice into fresh directories, compares every arra
 ``.npz`` the runs wrote, and prints one JSON object (arrays and elements that differ, each
 run's wall time).
 
-    python -m experiments.diagnostics.rerun_identity --out DIR [--command learn|regret]
+    python -m experiments.diagnostics.rerun_identity --out DIR [--command learn|learn_mjx|regret]
         [--nondeterministic]
 
 ``--nondeterministic`` sets ``SERN_GPU_NONDETERMINISTIC=1`` (XLA's autotuning and
@@ -27,6 +27,9 @@ COMMANDS = {
     "learn": ["grasp", "learn", "triangular_prism", "tless_part_a", "--policies",
               "sern,greedy,egreedy", "--seeds", "6", "--rounds", "2", "--no-figures",
               "--no-progress"],
+    "learn_mjx": ["grasp", "learn", "triangular_prism", "tless_part_a", "--policies",
+                  "sern,greedy", "--seeds", "4", "--rounds", "1", "--backend", "mjx",
+                  "--no-figures", "--no-progress"],
     "regret": ["regret", "--policies", "softmax,thompson,epsilon_greedy", "--arms", "64",
                "--horizon", "10000", "--seeds", "20000", "--no-figures", "--no-progress"],
 }

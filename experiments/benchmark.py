@@ -146,6 +146,15 @@ def _named_benchmark(doc: dict, path: Path) -> dict | None:
     return found[0] if found else None
 
 
+def _shown(path: Path) -> str:
+    """``path`` relative to the working directory where it lies below it (records name
+    files the same way on every machine), else as given."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def _benchmark_file(text: str) -> tuple[dict, Path]:
     """--benchmark NAME (a shipped benchmark) or a path to a benchmark JSON file."""
     from sern_jax.infra import validate
@@ -314,7 +323,7 @@ def collect(runs, screens, benchmark: str | None = None,
                        "lowvar_eval": np.stack([cells[o, q][1] for q in learners], 1),
                        "explore_success": np.stack([cells[o, q][2] for q in learners], 1)}
     meta = {"benchmark": {"name": info["name"], "version": info["version"]},
-            "benchmark_file": None if bench_path is None else str(bench_path),
+            "benchmark_file": None if bench_path is None else _shown(bench_path),
             "objects": objects, "objects_missing": objects_missing,
             "learners": learners, "reference": reference,
             "seeds": int(cfg["num_seeds"]), "rounds": int(cfg["rounds"]),

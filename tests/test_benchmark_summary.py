@@ -229,10 +229,15 @@ def test_figures_and_doc_tables_build_from_the_summary(world, tmp_path):
     assert len(lines) == 2 + len(s["learners"])
     assert "(reference)" in next(line for line in lines if line.startswith("| SERN"))
     assert "Holm p" in board and "ε-greedy" in board
-    screen = dt.benchmark_screen(s)
-    assert "`o3` | 70.0 | 90.0 | 8 × 16 | 8 × 16 | no" in screen
-    # the builders are not registered blocks until a page marks them
-    assert "benchmark-leaderboard" not in dt.BLOCKS
+    comps = dt.benchmark_comparisons(s).splitlines()
+    assert len(comps) == 2 + len(s["comparisons"])
+    findings = dt.benchmark_findings(s)
+    for c in s["comparisons"]:
+        if c["metric"] == "curve_area":
+            verdict = dt._bench_verdict(c)
+            assert verdict in findings
+            # the verdict follows the numbers: resolved exactly when Holm p < 0.05
+            assert verdict.startswith("resolved") == (c["holm_p"] < 0.05)
 
 
 def test_rerun_check_finds_equal_cells_equal_and_a_changed_cell(world, tmp_path):

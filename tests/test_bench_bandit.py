@@ -42,6 +42,7 @@ def test_bench_bandit_json(capsys):
     assert abs(agree["z_fast_vs_naive_jax"]) < 6
     # K = 64, G = 32: ~1.9 MB of float64/int64 statistics and histograms, whatever the seeds
     assert result["run_seeds_summary"]["summary_bytes"] < 2_500_000
+    _check_copy_split(result["run_seeds"], seeds=64, horizon=200, repeats=1)
 
 
 def test_bench_bandit_thompson_json(capsys):
@@ -102,3 +103,52 @@ def test_bench_bandit_smpybandits_reference_or_a_named_refusal(capsys):
     out = benchmarks.smpybandits_reference(3, 4, 60, np.array([30, 60]), seed=5)
     assert out["counts"][:, -1].sum(-1).tolist() == [60] * 3
     assert np.all(out["regret"][:, -1] >= out["regret"][:, 0]) and np.all(out["regret"] >= 0)
+
+
+def _finite_positive(x) -> bool:
+    return isinstance(x, (int, float)) and np.isfinite(x) and x > 0
+
+
+def _check_copy_split(rs: dict, seeds: int, horizon: int, repeats: int) -> None:
+    """The per-seed run_seeds entry says, from measured times, whether copying its outputs to
+    the host bounds it: bytes returned, copy seconds, compute-only seconds, their fractions."""
+    from sern_jax.bench import bandit as benchmarks
+    from sern_jax.engine import simulate as sim
+
+    for field in ("output_bytes", "output_copied_bytes", "output_copy_s",
+                  "output_copy_bytes_per_s", "compute_s", "compute_seed_rounds_per_s",
+                  "call_s", "copy_fraction", "compute_fraction"):
+        assert _finite_positive(rs[field]), (field, rs.get(field))
+    assert np.isfinite(rs["other_s"])
+    assert len(rs["output_copy_times_s"]) == len(rs["compute_times_s"]) == repeats
+    # counts [S, G, K] int32 and compensator [S, G, K] float32 at least
+    config, _ = benchmarks.bandit_config(
+        benchmarks.BanditWorkload(horizon=horizon, seeds=seeds))
+    g = sim.checkpoint_times(config).size
+    assert rs["output_bytes"] >= seeds * g * config.num_arms * 8
+    assert rs["output_copied_bytes"] >= rs["output_bytes"]
+    assert rs["call_s"] == rs["min_s"]
+    assert rs["copy_fraction"] == pytest.approx(rs["output_copy_s"] / rs["call_s"])
+    assert rs["bound"] == ("output copy" if rs["copy_fraction"] >= 0.5 else "compute")
+
+
+def test_bench_bandit_output_copy_bound_rule():
+    """The same measured split against a near-zero and a huge run_seeds call: copy-bound and
+    compute-bound, with the bytes of the per-seed arrays run_seeds returns."""
+    import jax
+
+    from sern_jax.bench import bandit as benchmarks
+    from sern_jax.engine import drive as executor
+    from sern_jax.infra import timing
+
+    w = benchmarks.BanditWorkload(horizon=200, seeds=64, repeats=1)
+    s = benchmarks.bandit_setup(w)
+    plan = executor.plan_run(s.config, s.params, w.seeds, mesh=s.mesh)
+    out = executor.run_seeds(s.config, s.params, w.seed, w.seeds, mesh=s.mesh)
+    fast = benchmarks._copy_split(s, plan, timing.Timing(out, None, (1e-9,), (1e-9,)))
+    slow = benchmarks._copy_split(s, plan, timing.Timing(out, None, (1e9,), (1e9,)))
+    assert fast["bound"] == "output copy" and fast["copy_fraction"] > 1
+    assert slow["bound"] == "compute" and slow["copy_fraction"] < 1e-6
+    nbytes = sum(x.nbytes for x in jax.tree.leaves(out))  # None fields are not leaves
+    assert fast["output_bytes"] == slow["output_bytes"] == nbytes > 0
+    assert fast["compute_s"] > 0 and slow["output_copy_s"] > 0

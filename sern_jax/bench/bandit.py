@@ -19,7 +19,9 @@ the shared :class:`BanditSetup`; a new way is one more such function and one mor
 
 * ``run_seeds``: ``executor.run_seeds``, the entry point users call: it picks the fast runner
   below and, on CPU, runs one jitted call per core at once (a compiled call uses one core
-  there), copying outputs to NumPy; timed end to end;
+  there), copying outputs to NumPy; timed end to end, and split into its compute alone and
+  its output copy alone (:func:`_copy_split`: ``output_bytes``, ``output_copy_s``,
+  ``compute_s``, ``copy_fraction``, ``bound``);
 * ``fast``: :mod:`sern_jax.engine.fast_softmax` as one jitted call (one core on CPU; exact, same
   random streams as the general runner);
 * ``general``: ``executor.batched_runner(config)`` = ``jit(vmap(simulate.make_run(config)))``,
@@ -105,7 +107,9 @@ def bandit_memory_bytes(w: BanditWorkload) -> int:
     from sern_jax.engine import drive as executor
 
     config, _ = bandit_config(w)
-    return (w.seeds * executor.bytes_per_seed(config) * (2 if w.pallas else 1)
+    # run_seeds' arrays, plus a device copy and a host copy of them while its output copy is
+    # timed apart, plus the Pallas path's outputs
+    return (w.seeds * executor.bytes_per_seed(config) * (4 if w.pallas else 3)
             + (w.numpy_seeds + w.smpybandits_seeds) * (4 * w.arms + 64) * 8)
 
 
@@ -383,7 +387,94 @@ def _path_run_seeds(s: BanditSetup):
              "runner": plan.runner,
              "seeds_per_call": plan.chunk, "concurrent_calls": plan.workers,
              "compile_s": compile_s, "seed_rounds_per_s": s.work / t.median_s, **t.stats()}
+    entry.update(_copy_split(s, plan, t))
     return entry, t.result
+
+
+COPY_BOUND_FRACTION = 0.5  # copy_fraction at or above which the per-seed path is copy-bound
+
+
+def _copy_split(s: BanditSetup, plan, t: timing.Timing) -> dict[str, Any]:
+    """Whether per-seed ``run_seeds`` is bounded by copying its outputs to the host.
+
+    Replays ``drive.run_plan`` (same compiled call, keys, chunks, worker threads and overlap)
+    twice per repeat: first with every call's outputs only waited for on the device
+    (``block_until_ready``, kept there, never fetched): ``compute_s``; then those same device
+    outputs go through the driver's own collector (``drive._SeedArrays``: pinned host memory or
+    ``copy_to_host_async``, then into the [S, ...] numpy arrays) with nothing computed:
+    ``output_copy_s``. Each is the best of ``repeats``; ``call_s`` is the best timed
+    ``run_seeds`` call, the denominator of ``copy_fraction`` and ``compute_fraction``. With
+    one worker on an accelerator the driver overlaps a call's copy with the next call's compute,
+    so the two fractions may sum to more than 1. ``bound`` is ``"output copy"`` when
+    ``copy_fraction >= COPY_BOUND_FRACTION``, else ``"compute"``.
+    """
+    import time
+
+    import jax
+
+    from sern_jax.engine import drive as executor
+
+    w = s.workload
+    root = jax.random.key(w.seed)
+    sharding = None
+    if plan.mesh is not None:
+        sharding = jax.sharding.NamedSharding(
+            plan.mesh, jax.sharding.PartitionSpec(plan.mesh.axis_names[0]))
+    fn = executor._compiled(plan, root.dtype)
+
+    def keys_of(start: int):
+        keys = executor._seed_keys_jit(root, plan.chunk, np.uint32(plan.first_seed + start))
+        return keys if sharding is None else jax.device_put(keys, sharding)
+
+    def size_of(start: int) -> int:
+        return min(plan.chunk, plan.num_seeds - start)
+
+    compute_times, copy_times, copied_bytes = [], [], 0
+    for _ in range(w.repeats):
+        held: dict[int, Any] = {}
+
+        def launch(start, premade):
+            return fn(premade.pop(start) if premade else keys_of(start), *plan.args)
+
+        def keep(start, out):
+            held[start] = jax.block_until_ready(out)
+            return size_of(start)
+
+        t0 = time.perf_counter()
+        premade = {st: keys_of(st) for st in plan.starts} if plan.workers > 1 else {}
+        executor._drive(plan, lambda st: launch(st, premade), keep, None)
+        compute_times.append(time.perf_counter() - t0)
+        copied_bytes = int(sum(x.nbytes for x in jax.tree.leaves(held)))
+
+        sink = executor._SeedArrays(plan)
+        t0 = time.perf_counter()
+        executor._drive(plan, held.pop, sink.collect, None)
+        copy_times.append(time.perf_counter() - t0)
+        del held, sink
+
+    output_bytes = int(sum(np.asarray(x).nbytes for x in jax.tree.leaves(t.result)))
+    compute_s, copy_s, call_s = min(compute_times), min(copy_times), t.best_s
+    copy_fraction = copy_s / call_s
+    return {
+        "output_bytes": output_bytes,  # Σ nbytes of the per-seed arrays run_seeds returns
+        "output_copied_bytes": copied_bytes,  # what the calls hand over (padding seeds too)
+        "output_copy_route": "pinned_host" if plan.pinned else "copy_to_host_async",
+        "output_copy_s": copy_s,
+        "output_copy_bytes_per_s": copied_bytes / copy_s,
+        "output_copy_times_s": [round(x, 6) for x in copy_times],
+        "compute_s": compute_s,
+        "compute_times_s": [round(x, 6) for x in compute_times],
+        "compute_seed_rounds_per_s": s.work / compute_s,
+        "call_s": call_s,
+        "copy_fraction": copy_fraction,
+        "compute_fraction": compute_s / call_s,
+        # the call's time spent on neither (planning, keys, threads); < 0 where copy overlaps
+        "other_s": call_s - compute_s - copy_s,
+        "bound": "output copy" if copy_fraction >= COPY_BOUND_FRACTION else "compute",
+        "copy_split": "compute_s: run_plan replayed, outputs blocked on the device and not "
+                      "fetched; output_copy_s: those device outputs through run_plan's "
+                      "collector; best of repeats, fractions of the best run_seeds call",
+    }
 
 
 def _path_run_seeds_summary(s: BanditSetup):

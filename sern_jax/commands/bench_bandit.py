@@ -178,6 +178,13 @@ def _table(result: dict, w) -> str:
         lines.append(f"{name:17s} {seeds:7d} {r['seed_rounds_per_s']:15,.0f} "
                      f"{r.get('compile_s', float('nan')):10.2f} {r['median_s']:9.3f} "
                      f"{agree[regret]:10.2f}")
+    rs = result["run_seeds"]
+    if "bound" in rs:
+        lines.append(f"run_seeds per-seed outputs {rs['output_bytes'] / 1e6:.3g} MB: copy to "
+                     f"host {rs['output_copy_s']:.4g} s ({rs['copy_fraction']:.0%} of the "
+                     f"{rs['call_s']:.4g} s call, "
+                     f"{rs['output_copy_bytes_per_s'] / 1e9:.3g} GB/s), compute alone "
+                     f"{rs['compute_s']:.4g} s: bound by {rs['bound']}")
     if result["numpy_seed_rounds_per_s"]:
         lines.append(f"speed-up of the best path ({result['best_path']}) vs NumPy: "
                      f"{result['speedup_vs_numpy']:.1f}×; run_seeds ran "

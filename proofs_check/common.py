@@ -42,22 +42,27 @@ def powers_of_ten(ts) -> list[int]:
     return out
 
 
-def runs_over_horizons(ts, alpha_of_t, *, estimator, means, num_seeds, share=True, **kw):
+def runs_over_horizons(ts, alpha_of_t, *, estimator, means, num_seeds, share=True,
+                       horizon=None, **kw):
     """One run per horizon T with alpha = alpha_of_t(T) (a separate run per T, as Theorems 4–5
     need, since alpha depends on T). The rounds 1..T of a longer run with the same constant
     alpha are exactly the horizon-T run, so for T_max <= 1e4 one compiled horizon-T_max
     program serves every T (read at the checkpoint t = T); larger T get their own horizon.
+    ``horizon`` (a power of ten >= max(ts), at most 1e4, with ``share``): the program's
+    horizon instead of T_max, so that calls with different ``ts`` share one program.
 
     Returns:
       dict T -> (RunOutput sliced at t = T, i.e. fields [S] / [S, K]).
     """
     ts = powers_of_ten(ts)
     out = {}
-    t_max = max(ts)
+    t_max = max(ts) if horizon is None else powers_of_ten([horizon])[0]
+    if t_max < max(ts):
+        raise ValueError(f"horizon {horizon} is below the largest T {max(ts)}")
     for t in ts:
-        horizon = t_max if (share and t_max <= 10_000) else t
-        ncp = int(round(math.log10(horizon))) + 1
-        res, times = fw.engine_run(estimator=estimator, means=means, horizon=horizon,
+        run_horizon = t_max if (share and t_max <= 10_000) else t
+        ncp = int(round(math.log10(run_horizon))) + 1
+        res, times = fw.engine_run(estimator=estimator, means=means, horizon=run_horizon,
                                    num_seeds=num_seeds, alpha0=alpha_of_t(t),
                                    num_checkpoints=ncp, **kw)
         idx = int(np.nonzero(times == t)[0][0])

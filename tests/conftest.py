@@ -1,6 +1,8 @@
 """Test configuration shared by all tests."""
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import hypothesis
@@ -8,6 +10,32 @@ import jax
 import pytest
 
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+# ---------------------------------------------------------------- one compile per program
+# Most of the suite's time is XLA compilation, and many tests build the same program again:
+# each `sern` command run in-process makes new closures, a test file rebuilds a learner another
+# test built, the other xdist worker or a subprocess compiles what this one did. One persistent
+# compilation cache per test run, in a temporary directory made for the run and removed after
+# it, lets each later compile of an identical program (the same HLO, compile options, jax and
+# XLA versions) load the executable XLA made the first time: the same executable, so the same
+# results, bit for bit. The workers and subprocesses find the directory in the environment.
+CACHE_ENV = "JAX_COMPILATION_CACHE_DIR"
+_made_cache = []
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput"):  # the controller, or the only process (-n 0)
+        path = tempfile.mkdtemp(prefix="sern-test-xla-cache-")
+        _made_cache.append(path)
+        os.environ[CACHE_ENV] = path  # read by the workers it starts and by subprocesses
+    if os.environ.get(CACHE_ENV):  # (a worker started elsewhere compiles everything itself)
+        jax.config.update("jax_compilation_cache_dir", os.environ[CACHE_ENV])
+
+
+def pytest_unconfigure(config):
+    for path in _made_cache:
+        shutil.rmtree(path, ignore_errors=True)
 
 hypothesis.settings.register_profile(
     "ci", deadline=None, derandomize=True, max_examples=50, print_blob=True
@@ -31,6 +59,7 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/grasp/test_runner.py",
     "tests/learners/test_engine_contract.py",  # every learner through the neural engine
     "tests/grasp/test_mjx_one_program.py",  # one MJX compile on the CPU: ~90 s
+    "tests/grasp/test_benchmark.py",  # benchmark learn runs: ~85 s
     "tests/test_simulate.py",
     "tests/grasp/test_sim.py",
     "tests/grasp/test_asktell.py",

@@ -269,16 +269,53 @@ def test_engine_modules_import_down_the_one_driver():
         assert "flax" not in tops or module == "sern_jax.engine.networks", module
 
 
+# Imports each module named on the command line in a fresh interpreter of its own, forked from
+# one that has imported jax and numpy and no module of sern_jax (every module checked imports
+# them first anyway): each check pays for jax's import once, not once per module. The XLA
+# backend is not started before the forks. Prints and exits non-zero on the modules that fail.
+_IMPORT_EACH_ALONE = textwrap.dedent("""
+    import importlib, os, sys, traceback
+    import jax, numpy
+    assert not any(m == "sern_jax" or m.startswith("sern_jax.") for m in sys.modules)
+    failed = []
+    for name in sys.argv[1:]:
+        pid = os.fork()
+        if pid == 0:
+            try:
+                importlib.import_module(name)
+            except BaseException:
+                traceback.print_exc()
+                os._exit(1)
+            os._exit(0)
+        if os.waitpid(pid, 0)[1] != 0:
+            failed.append(name)
+    print("failed:", " ".join(failed))
+    sys.exit(1 if failed else 0)
+""")
+
+
+def _import_each_alone(modules, cwd):
+    return subprocess.run([sys.executable, "-c", _IMPORT_EACH_ALONE, *modules], cwd=cwd,
+                          env=dict(os.environ, JAX_PLATFORMS="cpu"), capture_output=True,
+                          text=True, timeout=300)
+
+
 def test_each_engine_and_core_module_imports_alone_in_a_fresh_interpreter():
     # One interpreter per module: an import that only works after another module was imported
     # first (the symptom of a circle) fails here.
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
     names = sorted(m for m in MODULES if _layer(m) in ("core", "engine"))
-    script = "import importlib, sys\nfor name in sys.argv[1:]:\n    importlib.import_module(name)"
-    for module in ["sern_jax", *names]:
-        res = subprocess.run([sys.executable, "-c", script, module], env=env, cwd=ROOT,
-                             capture_output=True, text=True, timeout=300)
-        assert res.returncode == 0, (module, res.stderr[-2000:])
+    res = _import_each_alone(["sern_jax", *names], ROOT)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert res.stdout.strip() == "failed:"
+
+
+def test_the_fresh_interpreter_check_fails_a_module_that_needs_another_first(tmp_path):
+    # control: the check above can fail (each module starts from the forked interpreter, not
+    # from the state the previous one left)
+    (tmp_path / "first_one.py").write_text("x = 1\n")
+    (tmp_path / "needs_first.py").write_text("import sys\nsys.modules['first_one'].x\n")
+    res = _import_each_alone(["first_one", "needs_first"], tmp_path)
+    assert res.returncode == 1 and res.stdout.strip() == "failed: needs_first", res.stdout
 
 
 def test_package_loads_its_layers_lazily():

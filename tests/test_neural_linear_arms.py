@@ -111,6 +111,13 @@ def test_neural_lints_batched_equals_unbatched_on_the_wheel():
     run = nr.make_run(nr.NeuralRunConfig(horizon=horizon, update_every=10, num_checkpoints=2),
                       problem, registry.make("neural_lints", model, train), model)
     many = nr.run_seeds(run, seed=3, num_seeds=4, chunk_size=4)
+    # the learner contract's checks (tests/learners/test_engine_contract.py leaves this learner
+    # to this test in the default run): counts and compensator sum to T, all fields finite
+    np.testing.assert_array_equal(many.counts[:, -1].sum(axis=1), horizon)
+    np.testing.assert_allclose(many.compensator[:, -1].sum(axis=1), horizon, rtol=1e-5)
+    for field in ("regret", "regret_paper", "regret_rb", "regret_rb_paper", "compensator",
+                  "min_prob"):
+        assert np.isfinite(getattr(many, field)).all(), field
     from sern_jax.engine import simulate as sim
     one = jax.jit(run)(sim.seed_keys(jax.random.key(3), 1, 2)[0])
     np.testing.assert_array_equal(np.asarray(one.counts), many.counts[2])

@@ -158,7 +158,8 @@ def test_a_failed_evaluation_stops_the_run_and_no_later_round_is_saved(tiny_thet
     """Round 1's evaluation fails (its trials raise in the evaluation thread) while the main
     thread explores round 2: the error stops the run, and no checkpoint claims round 1 or
     later (the evaluation of round 2, queued behind it, neither runs nor saves)."""
-    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1)
+    # CONFIG's sizes: sern's and greedy's programs are run_a's, already compiled
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"))
     real, calls = step.run_trials, []
 
     def trials(*args, **kwargs):
@@ -255,9 +256,8 @@ def test_baselines_resume_by_replay_to_the_same_results_and_states(
     stopped after round 1 resumes by replaying the learners' updates and ends with the
     uninterrupted run's results (regret included) and learner states, bit for bit, for the
     randomised learners too (Thompson draws, bootstrap weights, ensemble members)."""
-    config = online_config.OnlineConfig(policies=policies, num_seeds=2, rounds=2, explore=2,
-                                 evaluate=1, eval_poses=1, eval_trials=1, fit_steps=2,
-                                 batch_size=4, regret_trials=1, regret_grasps=1)
+    # CONFIG's sizes: sern's programs are run_a's, already compiled
+    config = dataclasses.replace(CONFIG, policies=policies, regret_trials=1, regret_grasps=1)
     aside = tmp_path / "round1.npz"
     real = checkpoint.save
 
@@ -427,26 +427,29 @@ def test_regret_accounting(tiny_theta0, spec, tmp_path, monkeypatch):
         return out, counts
 
     monkeypatch.setattr(step, "oracle", spy)
-    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=2,
-                                 rounds=1, explore=2, regret_trials=2)
+    # CONFIG's sizes: sern's and greedy's programs are run_a's, already compiled
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), regret_trials=2)
     res = driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet)
     pr = res["results"].pseudo_regret
     assert np.isnan(pr[0]).all() and np.isfinite(pr[1:]).all()
     assert (np.abs(pr[1:]) <= config.explore + 1e-6).all()
-    assert len(calls) == 2  # one selection and one valuation set in the round
-    (key_sel, valid, select), (key_val, _, value) = calls
-    assert not np.array_equal(key_sel, key_val)  # independent trials
-    assert not np.array_equal(select, value)
-    action = res["results"].explore_action[1, 0, 1]  # greedy [S, E]
-    best, _ = stats.independent_best(select[0], value[0], valid[0])  # [S, E]
-    chosen = np.take_along_axis(value[0], action[..., None], -1)[..., 0]
-    np.testing.assert_allclose(pr[1, 0, 1], (best - chosen).sum(-1), atol=1e-12)
+    # one selection and one valuation set in each round
+    assert len(calls) == 2 * config.rounds
+    for r in range(1, config.rounds + 1):
+        (key_sel, valid, select), (key_val, _, value) = calls[2 * (r - 1):2 * r]
+        assert not np.array_equal(key_sel, key_val)  # independent trials
+        assert not np.array_equal(select, value)
+        action = res["results"].explore_action[r, 0, 1]  # greedy [S, E]
+        best, _ = stats.independent_best(select[0], value[0], valid[0])  # [S, E]
+        chosen = np.take_along_axis(value[0], action[..., None], -1)[..., 0]
+        np.testing.assert_allclose(pr[r, 0, 1], (best - chosen).sum(-1), atol=1e-12)
     assert "oracle" in res["timings"]
     for row in res["table"]:
         assert len(row["pseudo_regret"]) == config.rounds
-        (lo, hi), = row["pseudo_regret_ci95"]
-        assert lo <= row["pseudo_regret"][0] <= hi
+        assert len(row["pseudo_regret_ci95"]) == config.rounds
+        for (lo, hi), value in zip(row["pseudo_regret_ci95"], row["pseudo_regret"]):
+            assert lo <= value <= hi
         assert row["pseudo_regret_total_ci95"][0] <= row["pseudo_regret_total"]
     from sern_jax.commands import grasp_learn as learn_cli
     assert "Pseudo-regret per round" in learn_cli.format_table(res["table"])
@@ -839,7 +842,7 @@ def _uniform_learner(no_arm: bool = False) -> lbase.Learner:
 
 
 def test_toy_learner_runs_through_the_runner(tiny_theta0, spec, tmp_path):
-    config = dataclasses.replace(CONFIG, policies=("greedy",), num_seeds=1, eval_poses=0)
+    config = dataclasses.replace(CONFIG, policies=("greedy",), eval_poses=0)
     res = driver.run(config, [spec], tmp_path, theta0=tiny_theta0, progress=False,
                      log=_quiet, learners={"greedy": _uniform_learner()})
     action = res["results"].explore_action[1:, 0, 0, 0]  # [R, E]
@@ -852,8 +855,7 @@ def test_toy_learner_runs_through_the_runner(tiny_theta0, spec, tmp_path):
 
 def test_learner_returning_no_grasp_stops_the_run(tiny_theta0, spec, tmp_path):
     """NO_ARM while valid candidates exist is a broken learner, not a failed grasp."""
-    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), num_seeds=1,
-                                 eval_poses=0)
+    config = dataclasses.replace(CONFIG, policies=("sern", "greedy"), eval_poses=0)
     with pytest.raises(online_config.LearnerError,
                        match=r"learner 'greedy' returned no grasp \(NO_ARM\) on "
                              r"triangular_prism, seed 0, round 1, grasp 0 while \d+ "):

@@ -71,6 +71,9 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/test_executor.py",
     "tests/test_docs_examples.py",
     "tests/test_layout_pins.py",
+    # last of the heavy: its one MJX compile is test_mjx_one_program.py's program, which the
+    # run's compilation cache holds by then
+    "tests/grasp/test_dataset_mjx.py",
 ]
 
 

@@ -4,7 +4,7 @@ learn`` (or a ``sern regret``) twice into fresh directories, compares every arra
 run's wall time).
 
     python -m experiments.diagnostics.rerun_identity --out DIR [--command learn|learn_mjx|regret]
-        [--nondeterministic]
+        [--seeds N] [--nondeterministic]
 
 ``--nondeterministic`` sets ``SERN_GPU_NONDETERMINISTIC=1`` (XLA's autotuning and
 non-deterministic GPU kernels left on), the control for the cost and the effect of the
@@ -62,12 +62,19 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="a new directory for the two runs")
     p.add_argument("--command", choices=sorted(COMMANDS), default="learn")
+    p.add_argument("--seeds", type=int, default=None,
+                   help="the command's --seeds instead of its default (a smaller rerun)")
     p.add_argument("--nondeterministic", action="store_true",
                    help="leave XLA's GPU autotuning and non-deterministic kernels on")
     args = p.parse_args(argv)
     out = Path(args.out)
     if out.exists():
         p.error(f"--out {out} exists; give a new directory")
+    command = list(COMMANDS[args.command])
+    if args.seeds is not None:
+        if args.seeds < 1:
+            p.error(f"--seeds must be >= 1, got {args.seeds}")
+        command[command.index("--seeds") + 1] = str(args.seeds)
     env = dict(os.environ)
     if args.nondeterministic:
         env["SERN_GPU_NONDETERMINISTIC"] = "1"
@@ -75,10 +82,10 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("a", "b"):
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-m", "sern_jax.commands.main",
-                        *COMMANDS[args.command], "--out", str(out / name)],
+                        *command, "--out", str(out / name)],
                        env=env, check=True, stdout=subprocess.DEVNULL)
         walls.append(round(time.perf_counter() - t0, 1))
-    result = {"command": "sern " + " ".join(COMMANDS[args.command]),
+    result = {"command": "sern " + " ".join(command),
               "nondeterministic": args.nondeterministic, "wall_s": walls,
               **compare(out / "a", out / "b")}
     print(json.dumps(result))

@@ -16,8 +16,10 @@
 
 :func:`objects_benchmark` (``sern bench grasp --objects a,b,c``) times a batch of different
 objects per backend and counts the compiled MJX trial programs (``mjx_compiles``: 1, one program
-over objects x trials). :func:`measure_agreement` is the paired native-vs-MJX agreement of trial
-outcomes. Every figure
+over objects x trials). :func:`dataset_benchmark` (``sern bench grasp --dataset-objects N``)
+generates a slice of D0 per backend side by side and projects the full D0 and a Dex-Net-scale
+one from the measured rates. :func:`measure_agreement` is the paired native-vs-MJX agreement of
+trial outcomes. Every figure
 is measured in the call on this machine (``machine``: :func:`sern_jax.infra.io.machine`); timings
 use :func:`sern_jax.infra.timing.time_calls`. The JSON fields are ``sern bench grasp --json``'s.
 """
@@ -25,13 +27,19 @@ use :func:`sern_jax.infra.timing.time_calls`. The JSON fields are ``sern bench g
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from typing import Callable
 
 from sern_jax.infra import hosts, io, timing
 
-__all__ = ["GraspBenchConfig", "grasp_benchmark", "measure_agreement", "objects_benchmark",
-           "quality_net_benchmark", "random_grasps"]
+__all__ = ["DATASET_BACKENDS", "DEXNET_GRASPS", "DEXNET_OBJECTS", "GraspBenchConfig",
+           "dataset_benchmark", "dataset_rates", "grasp_benchmark", "measure_agreement",
+           "objects_benchmark", "quality_net_benchmark", "random_grasps"]
+
+DATASET_BACKENDS = ("native", "mjx")
+DEXNET_OBJECTS = 4_000  # a Dex-Net-scale D0: objects ...
+DEXNET_GRASPS = 6_700_000  # ... and labelled grasps (Dex-Net 2.0's 6.7M)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -167,6 +175,134 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
         f"program(s) (first call {tm.first_s:.1f} s)")
     return {"objects": [s.name for s in specs], "trials_per_object": n,
             "mjx_compiles": reverse.compiles, "native": native, "mjx": mjx}
+
+
+def dataset_rates(backend: str, stats: list[dict], seconds: float, objects_per_shard: int,
+                  trials_per_grasp: int = 1) -> dict:
+    """Rates of one D0 generation from its per-shard timings (``dataset.generate(...,
+    stats=)``), and projections to the default D0 (``DatasetConfig().num_objects`` objects)
+    and a Dex-Net-scale D0 (:data:`DEXNET_OBJECTS` objects; :data:`DEXNET_GRASPS` grasps).
+
+    Native: one object after another, so time scales with objects (``seconds`` per object).
+    MJX: the first shard (its contexts and the compile), then shards whose host contexts
+    (made ahead, in threads) overlap the device trials of the shard before: the steady cost of
+    a shard is the mean wall time of the shards after the first (with one shard measured: the
+    larger of its contexts_s and trials_s, the latter incl. the compile, an upper bound).
+    ``bound`` names the larger of the steady per-shard host contexts and trial times."""
+    from sern_jax.grasp.model import dataset
+
+    objects = sum(st["objects"] for st in stats)
+    trials = sum(st["trials"] for st in stats)
+    contexts_s = sum(st["contexts_s"] for st in stats)
+    trials_s = sum(st["trials_s"] for st in stats)
+    grasps_per_object = trials / trials_per_grasp / max(objects, 1)
+    row = {"seconds": seconds, "objects": objects, "shards": len(stats), "trials": trials,
+           "trials_per_s": trials / seconds if seconds > 0 else None,
+           "contexts_s": contexts_s, "trials_s": trials_s,
+           "grasps_per_object": grasps_per_object}
+    if backend == "mjx":
+        first, rest = stats[0], stats[1:]
+        row.update(first_shard_s=first["seconds"],
+                   rest_s=sum(st["seconds"] for st in rest) if rest else None,
+                   mjx_compiles=sum(st.get("compiled") or 0 for st in stats),
+                   waited_s=sum(st.get("waited_s", 0.0) for st in stats))
+        if rest:
+            steady = sum(st["seconds"] for st in rest) / len(rest)
+            host = sum(st["contexts_s"] for st in rest) / len(rest)
+            device = sum(st["trials_s"] for st in rest) / len(rest)
+            rest_trials = sum(st["trials"] for st in rest)
+            row["rest_trials_per_s"] = rest_trials / row["rest_s"] if row["rest_s"] else None
+            row["compile_s"] = max(first["trials_s"] - device, 0.0)
+            row["projection_from"] = "shards after the first"
+        else:
+            host, device = first["contexts_s"], first["trials_s"]
+            steady = max(host, device)
+            row["rest_trials_per_s"] = row["compile_s"] = None
+            row["projection_from"] = "first shard (incl. compile: an upper bound)"
+        row["shard_contexts_s"], row["shard_trials_s"] = host, device
+        row["bound"] = "host contexts" if host > device else "device trials"
+
+        def project(num_objects):
+            shards = math.ceil(num_objects / objects_per_shard)
+            return first["seconds"] + (shards - 1) * steady
+    else:
+        per_object = seconds / max(objects, 1)
+        row["bound"] = "host contexts" if contexts_s > trials_s else "host trials"
+
+        def project(num_objects):
+            return num_objects * per_object
+
+    def projection(num_objects):
+        secs = project(num_objects)
+        return {"objects": num_objects, "grasps": round(num_objects * grasps_per_object),
+                "seconds": secs, "hours": secs / 3600}
+
+    dexnet_objects = math.ceil(DEXNET_GRASPS / grasps_per_object) if grasps_per_object else 0
+    row["projections"] = {
+        "d0_default": projection(dataset.DatasetConfig().num_objects),
+        "dexnet_objects": projection(DEXNET_OBJECTS),
+        "dexnet_grasps": projection(dexnet_objects) if dexnet_objects else None,
+    }
+    return row
+
+
+def dataset_benchmark(num_objects: int, poses: int = 16,
+                      backends: tuple[str, ...] = DATASET_BACKENDS,
+                      log: Callable[[str], None] | None = None) -> dict:
+    """D0 generation per backend, side by side: ``dataset.generate`` of the first
+    ``num_objects`` objects of the default population with ``poses`` poses each (other fields:
+    ``DatasetConfig``'s defaults) into a temporary directory per backend, in this process.
+
+    Both backends label the same contexts with the same noise (the same keys), so
+    ``label_agreement`` is the fraction of valid slots whose labels agree. The candidate
+    sampler is compiled before either is timed (``warmup_s``). Per backend
+    (:func:`dataset_rates`): total seconds, trials (valid grasps labelled) and trials/s, the
+    host seconds making contexts and the seconds in the trials, MJX's first shard (incl. the
+    compile) against the rest and ``mjx_compiles``, and projections with their bound.
+    """
+    import tempfile
+
+    import jax
+    import numpy as np
+
+    from sern_jax.grasp.model import dataset
+    from sern_jax.grasp.world import context as context_lib
+
+    log = log or (lambda msg: None)
+    out = {"objects": num_objects, "poses": poses, "backends": list(backends),
+           "objects_per_shard": dataset.DatasetConfig().objects_per_shard,
+           "context_threads": hosts.context_threads(), "trial_threads": hosts.cpu_threads(),
+           "dexnet_objects": DEXNET_OBJECTS, "dexnet_grasps": DEXNET_GRASPS}
+    base = dataset.DatasetConfig(num_objects=num_objects, poses_per_object=poses)
+    t0 = time.perf_counter()
+    context_lib.make_contexts(jax.random.key(0), dataset.dataset_objects(base)[0], poses,
+                              context_lib.ContextConfig(renderer="native"))
+    out["warmup_s"] = time.perf_counter() - t0
+    labels = {}
+    for backend in backends:
+        config = dataclasses.replace(base, backend=backend)
+        stats: list[dict] = []
+        with tempfile.TemporaryDirectory(prefix=f"sern-d0-{backend}-") as d:
+            t0 = time.perf_counter()
+            dataset.generate(config, d, progress=False, log=lambda *_: None, stats=stats)
+            seconds = time.perf_counter() - t0
+            _, data = dataset.load(d)
+            labels[backend] = data["label"], data["valid"]
+        row = dataset_rates(backend, stats, seconds, config.objects_per_shard,
+                            config.trials_per_grasp)
+        out[backend] = row
+        extra = (f", first shard {row['first_shard_s']:.1f} s, {row['mjx_compiles']} compiled "
+                 "program(s)") if backend == "mjx" else ""
+        log(f"dataset {backend:6s}: {num_objects} objects in {seconds:.1f} s, "
+            f"{row['trials_per_s']:.1f} trials/s (contexts {row['contexts_s']:.1f} s, trials "
+            f"{row['trials_s']:.1f} s{extra}); default D0 ~"
+            f"{row['projections']['d0_default']['hours']:.2f} h, bound: {row['bound']}")
+    if len(labels) == 2:
+        (a, va), (b, vb) = labels["native"], labels["mjx"]
+        out["valid_equal"] = bool(np.array_equal(va, vb))
+        both = va & vb
+        out["label_agreement"] = float(np.mean(a[both] == b[both])) if both.any() else None
+    return out
 
 
 def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),

@@ -3,9 +3,10 @@
 The measurements (trials/s per backend and batch, depth images/s, candidate sets/s,
 contexts/s, a time split per stage, the quality network's rates, with ``--objects a,b,c``
 trials/s of that batch of objects per backend and ``mjx_compiles`` (MJX: one compiled
-program over objects x trials), and with ``--agreement N`` the paired native-vs-MJX
+program over objects x trials), with ``--dataset-objects N`` D0 generation of N objects per
+backend side by side, under ``"dataset"``, and with ``--agreement N`` the paired native-vs-MJX
 agreement) are :mod:`sern_jax.bench.grasp` (``grasp_benchmark``, ``objects_benchmark``,
-``measure_agreement``); this module parses and checks the flags, calls them, prints the
+``dataset_benchmark``, ``measure_agreement``); this module parses and checks the flags, calls them, prints the
 JSON and writes ``--out``. Every figure is measured in this run on this machine
 (``machine`` in the output).
 """
@@ -67,6 +68,15 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="a batch of objects (csv) timed per backend, MJX as one program over "
                         "objects x trials (reports mjx_compiles); trials per object: the largest "
                         "--mjx-batch")
+    p.add_argument("--dataset-objects", type=int, default=0,
+                   help="generate a D0 slice of this many objects per backend (temporary "
+                        "directories) and report seconds, trials/s, the host-contexts / trials "
+                        "split and projections to the default and a Dex-Net-scale D0 "
+                        "(0 = skip)")
+    p.add_argument("--dataset-poses", type=int, default=16,
+                   help="poses per object of --dataset-objects")
+    p.add_argument("--dataset-backends", default="native,mjx",
+                   help="backends of --dataset-objects (csv of native, mjx)")
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.set_defaults(func=run)
     return p
@@ -87,6 +97,16 @@ def _csv_ints(text: str, name: str) -> list[int]:
     return values
 
 
+def _dataset_backends(text: str) -> tuple[str, ...]:
+    names = [n.strip() for n in text.split(",")]
+    allowed = ("native", "mjx")
+    if (not all(names) or len(set(names)) != len(names)
+            or any(n not in allowed for n in names)):
+        raise ValueError(f"--dataset-backends must be distinct comma-separated names of "
+                         f"{', '.join(allowed)}, got {text!r}")
+    return tuple(names)
+
+
 def _validate(args) -> None:
     """Every option, before any benchmarking (also those that ``--quick`` replaces)."""
     for flag, text in (("--native-batch", args.native_batch), ("--mjx-batch", args.mjx_batch),
@@ -101,6 +121,11 @@ def _validate(args) -> None:
                                    ("--quality-batch", args.quality_batch, 1, _MAX_BATCH)):
         if not low <= value <= high:
             raise ValueError(f"{flag} must lie in [{low}, {high}], got {value}")
+    for flag, value, low, high in (("--dataset-objects", args.dataset_objects, 0, 100_000),
+                                   ("--dataset-poses", args.dataset_poses, 1, 1024)):
+        if isinstance(value, bool) or not low <= value <= high:
+            raise ValueError(f"{flag} must lie in [{low}, {high}], got {value}")
+    _dataset_backends(args.dataset_backends)
     if args.threads is not None and not 1 <= args.threads <= 4096:
         raise ValueError(f"--threads must lie in [1, 4096], got {args.threads}")
     if args.out is not None:
@@ -180,6 +205,10 @@ def run(args) -> int:
             ),
         )
         log(f"agreement overall: {out['agreement']['agreement']:.3f}")
+    if args.dataset_objects:
+        out["dataset"] = benchmarks.dataset_benchmark(
+            args.dataset_objects, args.dataset_poses, _dataset_backends(args.dataset_backends),
+            log)
 
     text = json.dumps(out, indent=None if args.json else 2, default=float)
     print(text)

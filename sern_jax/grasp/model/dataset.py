@@ -30,22 +30,31 @@ Randomness: object i is ``objects.sample_population(seed, ...)[i]``; its context
 ``fold_in(fold_in(key(seed), i), TRIAL_STREAM)`` (:func:`label_contexts` on
 ``fold_in(key(seed), i)``), so a shard's content does not depend on how many shards ran
 before it or on an interrupt.
+
+Backends: ``"native"`` labels one object after another (:func:`label_contexts`). ``"mjx"``
+labels a whole shard at once (:func:`label_shards_mjx`): the shard's contexts are made on the
+host in a thread pool, then every valid trial of the shard runs in one
+``sim.UniformBatch`` call of a fixed shape (objects ``objects_per_shard``, trials
+``poses_per_object * 64 * trials_per_grasp`` per object, padded with repeats whose results are
+dropped), so every shard runs the same one compiled program; the next shard's contexts are made
+while this shard's trials run. The draws are those of :func:`label_contexts`.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import hashlib
 import json
 import math
 import time
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import Callable, Iterator, NamedTuple, Sequence
 
 import jax
 import numpy as np
 
-from sern_jax.infra import io
+from sern_jax.infra import hosts, io
 from sern_jax.grasp.world import context as context_lib
 from sern_jax.grasp.world import objects as objects_lib
 from sern_jax.grasp.world import sim as sim_lib
@@ -56,6 +65,7 @@ __all__ = [
     "DatasetConfig",
     "LabelledContexts",
     "label_contexts",
+    "label_shards_mjx",
     "generate",
     "load",
     "dataset_objects",
@@ -65,7 +75,13 @@ __all__ = [
 
 CONTEXT_STREAM = 0
 TRIAL_STREAM = 1
-MJX_BATCH = 8192  # MJX trials per compiled call: one program for every object's trials
+MJX_BATCH = 8192  # MJX trials per compiled call of label_contexts: one program for all
+# The MJX shard path (label_shards_mjx): its version is part of an MJX dataset's fingerprint
+# (a shard's trials run as one objects x trials program, whose float32 results may differ in
+# the last bits from one object's trials run alone).
+MJX_SHARD_PROGRAM = "shard-objects-x-trials-1"
+MJX_CALL_TRIALS = 65_536  # most trials (objects x trials) of one compiled MJX shard call
+_CONTEXT_CONFIG = context_lib.ContextConfig(renderer="native")
 _SHARD_KEYS = ("object_index", "pose", "depth", "grasps", "valid", "center_px",
                "angle_px", "grasp_depth", "label", "successes", "nan_count")
 
@@ -125,6 +141,7 @@ class DatasetConfig:
             from sern_jax.grasp.world import uniform
 
             d["mjx_program"] = uniform.MJX_PROGRAM
+            d["mjx_shard_program"] = MJX_SHARD_PROGRAM
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -154,7 +171,8 @@ def label_contexts(
     num_poses: int,
     num_trials: int = 1,
     backend: str = "native",
-    context_config: context_lib.ContextConfig = context_lib.ContextConfig(renderer="native"),
+    context_config: context_lib.ContextConfig = _CONTEXT_CONFIG,
+    trial: sim_lib.TrialConfig = sim_lib.TrialConfig(),
 ) -> LabelledContexts:
     """Simulates the candidates of ``num_poses`` resting poses of one object.
 
@@ -168,6 +186,7 @@ def label_contexts(
       backend: simulator backend.
       context_config: camera / candidate / scene settings (default: the native renderer,
         which gives the same images on every backend without a compile per object).
+      trial: the trial (D0 uses the default).
 
     Returns:
       LabelledContexts with leading axis P.
@@ -177,25 +196,52 @@ def label_contexts(
     key_ctx = jax.random.fold_in(key, CONTEXT_STREAM)
     key_trials = jax.random.fold_in(key, TRIAL_STREAM)
     ctx = context_lib.make_contexts(key_ctx, spec, num_poses, context_config)
+    return _label_trials(ctx, key_trials, num_trials, backend, trial)
+
+
+class _TrialPlan(NamedTuple):
+    """The trials of one object's contexts: n valid candidates x M trials, in the order
+    (candidate, trial)."""
+
+    pi: np.ndarray  # [n] context of each valid candidate
+    ki: np.ndarray  # [n] slot of each valid candidate
+    grasps: np.ndarray  # [n * M, 4] commanded grasps
+    noise: sim_lib.TrialNoise  # [n * M] draws
+    poses: np.ndarray  # [n * M, 7] object start poses
+
+
+def _trial_plan(ctx, key_trials: jax.Array, num_trials: int,
+                trial: sim_lib.TrialConfig) -> _TrialPlan:
+    """Trial j of every valid candidate of context p uses the draw
+    ``fold_in(key_trials, p * num_trials + j)`` (common random numbers in a context)."""
+    valid = np.asarray(ctx.candidates.valid, bool)  # [P, K]
+    grasps = np.asarray(ctx.candidates.grasps, np.float64)
+    pi, ki = np.nonzero(valid)
+    if not len(pi):
+        return _TrialPlan(pi, ki, np.zeros((0, 4)), sim_lib.zero_noise(0),
+                          np.zeros((0, 7)))
+    num_p = valid.shape[0]
+    noise = sim_lib.sample_noise(key_trials, num_p * num_trials, trial)
+    idx = (pi[:, None] * num_trials + np.arange(num_trials)[None, :]).reshape(-1)
+    return _TrialPlan(
+        pi, ki, np.repeat(grasps[pi, ki], num_trials, axis=0),
+        sim_lib.TrialNoise(*(np.asarray(a)[idx] for a in noise)),
+        np.repeat(np.asarray(ctx.poses)[pi], num_trials, axis=0))
+
+
+def _labelled(ctx, plan: _TrialPlan, res: sim_lib.TrialResult | None,
+              num_trials: int) -> LabelledContexts:
+    """LabelledContexts of ``ctx`` from the results of its plan's trials (None: no valid
+    candidate, nothing simulated)."""
     cands = ctx.candidates
-    valid = np.asarray(cands.valid, bool)  # [P, K]
-    grasps = np.asarray(cands.grasps, np.float64)
+    valid = np.asarray(cands.valid, bool)
     num_p, num_k = valid.shape
     successes = np.zeros((num_p, num_k), np.int32)
     nan_count = np.zeros((num_p, num_k), np.int32)
     first = np.full((num_p, num_k), -1, np.int8)
-    pi, ki = np.nonzero(valid)
+    pi, ki = plan.pi, plan.ki
     if len(pi):
-        simulator = sim_lib.GraspSimulator(ctx.model, backend=backend, mjx_batch=MJX_BATCH)
         n = len(pi)
-        # trial j of context p uses the draw fold_in(key_trials, p * num_trials + j) for
-        # every candidate of that context.
-        noise = sim_lib.sample_noise(key_trials, num_p * num_trials, simulator.config)
-        idx = (pi[:, None] * num_trials + np.arange(num_trials)[None, :]).reshape(-1)
-        tnoise = sim_lib.TrialNoise(*(np.asarray(a)[idx] for a in noise))
-        res = simulator.run_trials(
-            np.repeat(grasps[pi, ki], num_trials, axis=0), tnoise,
-            object_pose=np.repeat(np.asarray(ctx.poses)[pi], num_trials, axis=0))
         succ = res.success.reshape(n, num_trials)
         successes[pi, ki] = succ.sum(1)
         nan_count[pi, ki] = res.nan.reshape(n, num_trials).sum(1)
@@ -203,7 +249,7 @@ def label_contexts(
     return LabelledContexts(
         pose=np.asarray(ctx.poses, np.float64),
         depth=np.asarray(ctx.depth, np.float32),
-        grasps=grasps.astype(np.float32),
+        grasps=np.asarray(cands.grasps, np.float64).astype(np.float32),
         valid=valid,
         center_px=np.asarray(cands.center_px, np.float32),
         angle_px=np.asarray(cands.angle_px, np.float32),
@@ -212,6 +258,182 @@ def label_contexts(
         nan_count=nan_count,
         label=first,
     )
+
+
+def _label_trials(ctx, key_trials: jax.Array, num_trials: int, backend: str,
+                  trial: sim_lib.TrialConfig) -> LabelledContexts:
+    """Runs the trials of one object's contexts on ``backend`` (one simulator per object)."""
+    plan = _trial_plan(ctx, key_trials, num_trials, trial)
+    res = None
+    if len(plan.pi):
+        simulator = sim_lib.GraspSimulator(ctx.model, backend=backend, config=trial,
+                                           mjx_batch=MJX_BATCH)
+        res = simulator.run_trials(plan.grasps, plan.noise, object_pose=plan.poses)
+    return _labelled(ctx, plan, res, num_trials)
+
+
+# ----------------------------------------------------------------------------- MJX shards
+
+
+class _Prepared(NamedTuple):
+    """One object of an MJX shard, made on the host."""
+
+    index: int  # object index in the dataset
+    ctx: context_lib.GraspContexts
+    plan: _TrialPlan
+    uniform: tuple  # sim.UniformBatch.prepare(ctx.model, shape)
+
+
+def _prepare_object(root: jax.Array, index: int, spec, config: DatasetConfig,
+                    trial: sim_lib.TrialConfig, shape, threads: int,
+                    context_config: context_lib.ContextConfig = _CONTEXT_CONFIG) -> _Prepared:
+    key = jax.random.fold_in(root, index)
+    key_ctx = jax.random.fold_in(key, CONTEXT_STREAM)
+    key_trials = jax.random.fold_in(key, TRIAL_STREAM)
+    ctx = context_lib.make_contexts(key_ctx, spec, config.poses_per_object, context_config,
+                                    threads=threads)
+    plan = _trial_plan(ctx, key_trials, config.trials_per_grasp, trial)
+    return _Prepared(index, ctx, plan, sim_lib.UniformBatch.prepare(ctx.model, shape))
+
+
+def _shard_call_shape(config: DatasetConfig, num_candidates: int) -> tuple[int, int, int]:
+    """(objects, trials per object, trials per object per compiled call) of every MJX shard
+    call of ``config``: fixed for the whole dataset, so one compiled program serves all."""
+    objects = config.objects_per_shard
+    trials = config.poses_per_object * num_candidates * config.trials_per_grasp
+    calls = -(-objects * trials // MJX_CALL_TRIALS)
+    return objects, trials, -(-trials // calls)
+
+
+def _run_mjx_shard(prepared: list[_Prepared], config: DatasetConfig, trial: sim_lib.TrialConfig,
+                   shape) -> tuple[list[LabelledContexts], tuple[int, int] | None]:
+    """Every valid trial of a shard's objects in one ``UniformBatch`` of the dataset's fixed
+    shape; returns the objects' LabelledContexts and the number of compiled trial programs
+    before and after the call (None: nothing to simulate)."""
+    num_k = np.shape(prepared[0].ctx.candidates.valid)[1]
+    num_o, num_t, per_call = _shard_call_shape(config, num_k)
+    m = config.trials_per_grasp
+    if not any(len(p.plan.pi) for p in prepared):  # nothing to simulate
+        return [_labelled(p.ctx, p.plan, None, m) for p in prepared], None
+    # A short last shard is padded with copies of its first object, each object's trials
+    # with copies of its first trial; their results are dropped. An object without a valid
+    # candidate runs a fixed grasp above the table centre (results dropped too).
+    rows = prepared + [prepared[0]] * (num_o - len(prepared))
+    grasps = np.empty((num_o, num_t, 4))
+    poses = np.empty((num_o, num_t, 7))
+    noise = sim_lib.TrialNoise(np.empty((num_o, num_t)), np.empty((num_o, num_t)),
+                               np.empty((num_o, num_t, 4)))
+    for o, p in enumerate(rows):
+        n = len(p.plan.grasps)
+        if n:
+            idx = np.concatenate([np.arange(n), np.zeros(num_t - n, np.int64)])
+            grasps[o], poses[o] = p.plan.grasps[idx], p.plan.poses[idx]
+            for dst, src in zip(noise, p.plan.noise):
+                dst[o] = src[idx]
+        else:
+            grasps[o] = (0.0, 0.0, 0.1, 0.0)
+            poses[o] = np.asarray(p.ctx.poses)[0]
+            for dst, src in zip(noise, sim_lib.zero_noise(num_t)):
+                dst[o] = src
+    batch = sim_lib.UniformBatch([p.ctx.model for p in rows], trial, shape,
+                                 trials=per_call, prepared=[p.uniform for p in rows])
+    before = batch.compiles
+    results = batch.run_trials(grasps, noise, poses)
+    out = []
+    for p, res in zip(prepared, results):
+        n = len(p.plan.grasps)
+        res = sim_lib.TrialResult(*(a[:n] for a in res[:4]), res.backend)
+        out.append(_labelled(p.ctx, p.plan, res if n else None, m))
+    return out, (before, batch.compiles)
+
+
+def label_shards_mjx(
+    config: DatasetConfig,
+    shards: Sequence[int],
+    shard_specs: Sequence[Sequence[objects_lib.ObjectSpec]],
+    *,
+    trial: sim_lib.TrialConfig = sim_lib.TrialConfig(),
+    shape=None,
+    context_config: context_lib.ContextConfig = _CONTEXT_CONFIG,
+    threads: int | None = None,
+    stats: list | None = None,
+) -> Iterator[tuple[int, list[tuple[int, LabelledContexts]]]]:
+    """Labels shards on the MJX backend, one compiled trial program for all of them.
+
+    A shard's contexts (and each object's uniform scene) are made on the host in a pool of
+    ``threads`` threads (None: ``hosts.context_threads()``), the objects side by side; then
+    every valid trial of the shard runs in one ``sim.UniformBatch`` call of the dataset's
+    fixed shape (:func:`_shard_call_shape`). While shard s's trials run, shard s+1's
+    contexts are made in a background thread. The draws are :func:`label_contexts`'s: the
+    labels mean the same, object for object.
+
+    Args:
+      config: the dataset (backend ``"mjx"``).
+      shards: shard numbers, in the order to label them.
+      shard_specs: each shard's objects (its slice of :func:`dataset_objects`).
+      trial: the trial (D0 uses the default).
+      shape: the ``uniform.UniformShape`` of every object (None: the default, 4 parts).
+      context_config: camera / candidate / scene settings (D0: the native renderer).
+      threads: host threads for the contexts.
+      stats: optional list that receives one dict per shard: shard, objects, trials (valid
+        trials run), contexts_s (host: contexts and uniform scenes), trials_s (the trial
+        program, incl. a compile), waited_s (time spent waiting for the contexts),
+        seconds (wall, from the previous shard's end), compiled (trial programs compiled
+        for this shard: 1 for the first shard of a process, then 0) and compiles (compiled
+        programs of the trial function so far; None where nothing was simulated).
+
+    Yields:
+      ``(shard, [(object index, LabelledContexts), ...])`` in the order of ``shards``.
+    """
+    from sern_jax.grasp.world import uniform
+
+    if config.backend != "mjx":
+        raise ValueError(f"label_shards_mjx labels an MJX dataset, got backend "
+                         f"{config.backend!r} (native: write_shard)")
+    shards, shard_specs = list(shards), [list(s) for s in shard_specs]
+    if len(shards) != len(shard_specs):
+        raise ValueError(f"{len(shards)} shards but {len(shard_specs)} lists of objects")
+    if not shards:
+        return
+    shape = uniform.UniformShape() if shape is None else shape
+    root = jax.random.key(config.seed)
+    total = threads or hosts.context_threads()
+    workers = max(1, min(config.objects_per_shard, total))
+    inner = -(-total // workers)  # the cores left over settle poses of one object
+
+    def build(s, specs, pool):
+        t0 = time.perf_counter()
+        lo = s * config.objects_per_shard
+        futures = [pool.submit(_prepare_object, root, lo + j, spec, config, trial, shape,
+                               inner, context_config) for j, spec in enumerate(specs)]
+        return [f.result() for f in futures], time.perf_counter() - t0
+
+    with concurrent.futures.ThreadPoolExecutor(
+            workers, thread_name_prefix="sern-d0-objects",
+            initializer=context_lib.lower_priority) as pool, \
+            concurrent.futures.ThreadPoolExecutor(
+                1, thread_name_prefix="sern-d0-ahead") as ahead:
+        pending = ahead.submit(build, shards[0], shard_specs[0], pool)
+        t_prev = time.perf_counter()
+        for n, s in enumerate(shards):
+            t0 = time.perf_counter()
+            prepared, contexts_s = pending.result()
+            waited = time.perf_counter() - t0
+            if n + 1 < len(shards):
+                pending = ahead.submit(build, shards[n + 1], shard_specs[n + 1], pool)
+            t1 = time.perf_counter()
+            labelled, compiles = _run_mjx_shard(prepared, config, trial, shape)
+            compiled = 0 if compiles is None else compiles[1] - compiles[0]
+            t2 = time.perf_counter()
+            if stats is not None:
+                stats.append({
+                    "shard": s, "objects": len(prepared),
+                    "trials": int(sum(len(p.plan.grasps) for p in prepared)),
+                    "contexts_s": contexts_s, "trials_s": t2 - t1, "waited_s": waited,
+                    "seconds": t2 - t_prev, "compiled": compiled,
+                    "compiles": None if compiles is None else compiles[1]})
+            t_prev = t2
+            yield s, [(p.index, lc) for p, lc in zip(prepared, labelled)]
 
 
 def shard_paths(out_dir: str | Path, config: DatasetConfig) -> list[Path]:
@@ -240,6 +462,7 @@ def generate(
     progress: bool = True,
     log: Callable[[str], None] = print,
     ray=None,
+    stats: list | None = None,
 ) -> dict:
     """Generates (or resumes) D0 into ``out_dir``; returns the summary dict.
 
@@ -249,30 +472,58 @@ def generate(
     (``io.run_lock``) while this runs: a second process gets ``io.RunLockedError``.
     ``ray``: a ``sern_jax.infra.distributed.RayConfig`` computes the missing shards as Ray tasks
     (:func:`write_shard`, the function this process calls without it: the same files).
+    ``stats``: optional list that receives one timing dict per shard computed in this
+    process (:func:`write_shard`; the MJX backend: :func:`label_shards_mjx`'s).
     """
     out_dir = Path(out_dir)
     _check_dir(out_dir, config)
     specs = dataset_objects(config)
     with io.run_lock(out_dir):
         _check_dir(out_dir, config)  # again, under the lock
-        return _generate(config, out_dir, specs, progress, log, ray)
+        return _generate(config, out_dir, specs, progress, log, ray, stats)
 
 
 def write_shard(config: DatasetConfig, shard: int, specs, out_dir: str | Path,
-                on_object: Callable[[], None] | None = None) -> None:
+                on_object: Callable[[], None] | None = None, stats: list | None = None) -> None:
     """Simulates shard ``shard`` (objects ``specs``, the shard's slice of
     :func:`dataset_objects`) and saves it atomically: the unit of work of D0, run in this
-    process or as a Ray task."""
+    process or as a Ray task. ``stats``: optional list that receives the shard's timings (as
+    :func:`label_shards_mjx`'s)."""
+    if config.backend == "mjx":
+        for _, parts in label_shards_mjx(config, [shard], [specs], stats=stats):
+            _save_shard(config, shard, parts, out_dir)
+            for _ in parts:
+                if on_object is not None:
+                    on_object()
+        return
     root = jax.random.key(config.seed)
     lo = shard * config.objects_per_shard
     parts = []
+    t_start = time.perf_counter()
+    contexts_s = trials_s = 0.0
+    trials = 0
     for i, spec in zip(range(lo, lo + len(specs)), specs):
         key = jax.random.fold_in(root, i)
-        lc = label_contexts(key, spec, config.poses_per_object, config.trials_per_grasp,
-                            config.backend)
+        t0 = time.perf_counter()
+        ctx = context_lib.make_contexts(jax.random.fold_in(key, CONTEXT_STREAM), spec,
+                                        config.poses_per_object, _CONTEXT_CONFIG)
+        t1 = time.perf_counter()
+        lc = _label_trials(ctx, jax.random.fold_in(key, TRIAL_STREAM),
+                           config.trials_per_grasp, config.backend, sim_lib.TrialConfig())
+        contexts_s += t1 - t0
+        trials_s += time.perf_counter() - t1
+        trials += int(lc.valid.sum()) * config.trials_per_grasp
         parts.append((i, lc))
         if on_object is not None:
             on_object()
+    if stats is not None:
+        stats.append({"shard": shard, "objects": len(parts), "trials": trials,
+                      "contexts_s": contexts_s, "trials_s": trials_s,
+                      "seconds": time.perf_counter() - t_start})
+    _save_shard(config, shard, parts, out_dir)
+
+
+def _save_shard(config: DatasetConfig, shard: int, parts, out_dir: str | Path) -> None:
     arrays = {
         "object_index": np.concatenate(
             [np.full(len(lc.pose), i, np.int32) for i, lc in parts]),
@@ -282,7 +533,8 @@ def write_shard(config: DatasetConfig, shard: int, specs, out_dir: str | Path,
     io.save_npz(shard_paths(out_dir, config)[shard], **arrays)
 
 
-def _generate(config, out_dir: Path, specs, progress: bool, log, ray=None) -> dict:
+def _generate(config, out_dir: Path, specs, progress: bool, log, ray=None,
+              stats=None) -> dict:
     io.save_json(out_dir / "config.json",
                  {"config": config, "fingerprint": config.fingerprint(),
                   "physics": sim_lib.physics_settings(),
@@ -310,9 +562,16 @@ def _generate(config, out_dir: Path, specs, progress: bool, log, ray=None) -> di
     else:
         bar = tqdm(total=config.num_objects, initial=done, unit="obj", desc="dataset",
                    disable=not progress)
-        for s in todo:
-            write_shard(config, s, specs[s * per:(s + 1) * per], out_dir,
-                        on_object=lambda: bar.update(1))
+        if config.backend == "mjx":  # one program for every shard, contexts made ahead
+            for s, parts in label_shards_mjx(config, todo,
+                                             [specs[s * per:(s + 1) * per] for s in todo],
+                                             stats=stats):
+                _save_shard(config, s, parts, out_dir)
+                bar.update(len(parts))
+        else:
+            for s in todo:
+                write_shard(config, s, specs[s * per:(s + 1) * per], out_dir,
+                            on_object=lambda: bar.update(1), stats=stats)
         bar.close()
     summary = summarize(out_dir, config)
     summary["seconds_this_run"] = time.perf_counter() - t0

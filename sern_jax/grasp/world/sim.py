@@ -692,6 +692,9 @@ class UniformBatch:
         most parts).
       trials: trials per object per compiled call (calls are padded to it, so every call
         runs the one program).
+      prepared: optional ``UniformBatch.prepare(model, shape)`` of every model, made ahead
+        (e.g. in threads, while another batch runs); None makes them here. A model may
+        appear twice (one prepared pair serves both).
 
     Attributes:
       uniform: the uniform ``MjModel`` of each object (native MuJoCo runs them too).
@@ -701,7 +704,7 @@ class UniformBatch:
     """
 
     def __init__(self, models, config: TrialConfig = TrialConfig(), shape=None,
-                 trials: int = 64):
+                 trials: int = 64, prepared=None):
         from sern_jax.grasp.world import uniform
 
         models = list(models)
@@ -711,11 +714,26 @@ class UniformBatch:
             shape = max((uniform.shape_for(m) for m in models), key=lambda s: s.parts)
         if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
             raise ValueError(f"trials must be an int >= 1, got {trials!r}")
+        if prepared is None:
+            prepared = [self.prepare(m, shape) for m in models]
+        prepared = list(prepared)
+        if len(prepared) != len(models):
+            raise ValueError(f"prepared holds {len(prepared)} pairs for {len(models)} models")
         self.config, self.shape, self.trials = config, shape, trials
-        self.uniform = [uniform.uniform_scene(m, shape) for m in models]
-        self.mx = uniform.stack_models([uniform.put_uniform(m, shape) for m in self.uniform])
+        self.uniform = [u for u, _ in prepared]
+        self.mx = uniform.stack_models([mx for _, mx in prepared])
         self.program = _objects_program(make_execute(config, self.uniform[0]))
         self.pose0 = np.stack([scene_lib.object_pose(m) for m in self.uniform])
+
+    @staticmethod
+    def prepare(model: mujoco.MjModel, shape) -> tuple:
+        """The host work of one object (resampled hulls, ``mjx.put_model``): its uniform
+        ``MjModel`` and normalized ``mjx.Model`` (``uniform.uniform_scene`` and
+        ``uniform.put_uniform`` with ``shape``), for ``UniformBatch(..., prepared=)``."""
+        from sern_jax.grasp.world import uniform
+
+        u = uniform.uniform_scene(model, shape)
+        return u, uniform.put_uniform(u, shape)
 
     @property
     def compiles(self) -> int:

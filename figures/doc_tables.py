@@ -1361,7 +1361,8 @@ def performance_gpu_public_path() -> str:
     and the plain ``jit(vmap(scan))`` bandit of each run."""
     rows = []
     folder = RESULTS / "gpu_public_path"
-    for code, what in (("6959a83", "fused kernel by default"),
+    for code, what in (("ed76b63", "fused kernel by default"),
+                       ("6959a83", "fused kernel by default"),
                        ("b762d0d", "before: the XLA fast runner")):
         path = folder / f"bench_bandit_{code}.json"
         d = _json(path)
@@ -1370,10 +1371,70 @@ def performance_gpu_public_path() -> str:
         for key, name in (("run_seeds_summary", "`run_seeds(summary=True)`"),
                           ("run_seeds", "`run_seeds`, per-seed arrays")):
             r = d[key]["seed_rounds_per_s"]
+            bound = ("—" if "bound" not in d[key] else
+                     f"{d[key]['bound']}: copying {d[key]['output_bytes'] / 1e6:,.0f} MB to "
+                     f"the host is {pct(d[key]['copy_fraction'], 0)} of the call; compute "
+                     f"alone {d[key]['compute_seed_rounds_per_s'] / 1e9:.2f} G")
             rows.append([f"{code} ({what})", name, f"{w['seeds']:,}", f"{r / 1e9:.2f} G",
-                         f"{r / naive:.2f}×", "one NVIDIA H200", link(path)])
+                         f"{r / naive:.2f}×", bound, "one NVIDIA H200", link(path)])
     return table(["code", "path", "seeds", "seed-rounds/s", "over plain jit(vmap(scan)), "
-                  "same run", "hardware", "record"], rows)
+                  "same run", "bound", "hardware", "record"], rows)
+
+
+def _shard_times(log_path: Path) -> list[float]:
+    """Seconds from a D0 directory's ``config.json`` to each shard's end, read from the
+    directory listing (``ls --full-time``) at the end of a record's log."""
+    import datetime as dt_lib
+
+    stamps = {}
+    for m in re.finditer(r"(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+) \+0000 (\S+)",
+                         log_path.read_text()):
+        day, frac = m.group(1).split(".")
+        t = dt_lib.datetime.strptime(day, "%Y-%m-%d %H:%M:%S").timestamp() + float("0." + frac)
+        stamps[m.group(2)] = t
+    shards = sorted(k for k in stamps if k.startswith("shard_"))
+    return [stamps[k] - stamps["config.json"] for k in shards]
+
+
+@block("performance-d0")
+def performance_d0() -> str:
+    """D0 generation per backend on one GPU host: native on the host's cores against MJX's
+    one shard program, first shard (compile included) and the next."""
+    folder = RESULTS / "mjx_one_program"
+    native = _json(folder / "d0_native_20obj_h200_summary.json")
+    steady_log = folder / "d0_mjx_10obj_5pershard_h200.log"
+    first, second = _shard_times(steady_log)
+    per_call = 5 * 16 * 64
+    n_rate = native["labelled_grasps"] / native["seconds_this_run"]
+    m_rate = per_call / (second - first)
+    rows = [["native MuJoCo, 16 host cores", f"{native['objects']} × 16 poses",
+             f"{native['seconds_this_run']:.1f} s in all", f"{n_rate:,.0f}",
+             f"{200 * 16 * 64 / n_rate / 60:.1f} min",
+             link(folder / "d0_native_20obj_h200.log")],
+            ["MJX, one program (5 objects × 1,024 trials per call)", "10 × 16 poses",
+             f"first shard {first:.0f} s (compile included), second {second - first:.1f} s",
+             f"{m_rate:,.0f}", f"{200 * 16 * 64 / m_rate / 60:.0f} min",
+             link(steady_log)]]
+    return table(["backend", "objects × poses", "time", "labelled grasps/s (native: all; "
+                  "MJX: second shard)", "default D0 (204,800) at that rate", "record"], rows)
+
+
+@block("gpu-reruns")
+def gpu_reruns() -> str:
+    """Reruns on one GPU: every saved array of two runs of one command compared."""
+    folder = RESULTS / "gpu_public_path"
+    rows = []
+    for name in ("rerun_learn_6959a83.json", "rerun_learn_mjx_ed76b63.json",
+                 "rerun_regret_ed76b63.json", "rerun_regret_nondet_ed76b63.json"):
+        r = _json(folder / name)
+        cmd = r["command"].replace(" --no-figures", "").replace(" --no-progress", "")
+        opts = "off" if r.get("nondeterministic") else "on (default)"
+        same = "yes" if not r["arrays_differing"] else "no"
+        rows.append([f"`{cmd}`", opts, f"{len(r['arrays_differing'])} of {r['arrays']}",
+                     f"{r['elements_differing']:,}", same,
+                     " / ".join(f"{w:.0f} s" for w in r["wall_s"]), link(folder / name)])
+    return table(["command, run twice", "deterministic options", "arrays that differ",
+                  "elements that differ", "bit for bit", "wall time, each run", "record"], rows)
 
 
 @block("performance-mjx-one-program")

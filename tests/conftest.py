@@ -58,7 +58,7 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/test_distributed.py",  # local Ray: ~2 min
     "tests/grasp/test_runner.py",
     "tests/learners/test_engine_contract.py",  # every learner through the neural engine
-    "tests/grasp/test_mjx_one_program.py",  # one MJX compile on the CPU: ~90 s
+    "tests/grasp/test_mjx_one_program.py",  # one MJX compile on the CPU, D0 shards on it
     "tests/grasp/test_benchmark.py",  # benchmark learn runs: ~85 s
     "tests/test_simulate.py",
     "tests/grasp/test_sim.py",
@@ -71,9 +71,6 @@ HEAVY = [  # longest first (the idle CI run's --durations, 2 cores)
     "tests/test_executor.py",
     "tests/test_docs_examples.py",
     "tests/test_layout_pins.py",
-    # last of the heavy: its one MJX compile is test_mjx_one_program.py's program, which the
-    # run's compilation cache holds by then
-    "tests/grasp/test_dataset_mjx.py",
 ]
 
 

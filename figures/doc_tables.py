@@ -1400,23 +1400,31 @@ def _shard_times(log_path: Path) -> list[float]:
 def performance_d0() -> str:
     """D0 generation per backend on one GPU host: native on the host's cores against MJX's
     one shard program, first shard (compile included) and the next."""
+    from sern_jax.grasp.model import dataset
+
     folder = RESULTS / "mjx_one_program"
     native = _json(folder / "d0_native_20obj_h200_summary.json")
+    mjx = _json(folder / "d0_mjx_10obj_5pershard_h200_summary.json")
     steady_log = folder / "d0_mjx_10obj_5pershard_h200.log"
-    first, second = _shard_times(steady_log)
-    per_call = 5 * 16 * 64
+    ends = _shard_times(steady_log)
+    assert mjx["valid_fraction"] == 1.0  # every slot valid: the shards are equal
+    per_shard = mjx["labelled_grasps"] // len(ends)
+    poses = mjx["contexts"] // mjx["objects"]
+    d0 = dataset.DatasetConfig().max_grasps  # the default D0's candidate slots
     n_rate = native["labelled_grasps"] / native["seconds_this_run"]
-    m_rate = per_call / (second - first)
-    rows = [["native MuJoCo, 16 host cores", f"{native['objects']} × 16 poses",
+    m_rate = per_shard / (ends[1] - ends[0])
+    rows = [["native MuJoCo, 16 host cores",
+             f"{native['objects']} × {native['contexts'] // native['objects']} poses",
              f"{native['seconds_this_run']:.1f} s in all", f"{n_rate:,.0f}",
-             f"{200 * 16 * 64 / n_rate / 60:.1f} min",
-             link(folder / "d0_native_20obj_h200.log")],
-            ["MJX, one program (5 objects × 1,024 trials per call)", "10 × 16 poses",
-             f"first shard {first:.0f} s (compile included), second {second - first:.1f} s",
-             f"{m_rate:,.0f}", f"{200 * 16 * 64 / m_rate / 60:.0f} min",
+             f"{d0 / n_rate / 60:.1f} min", link(folder / "d0_native_20obj_h200.log")],
+            [f"MJX, one program ({mjx['objects'] // len(ends)} objects × "
+             f"{per_shard * len(ends) // mjx['objects']:,} trials per call)",
+             f"{mjx['objects']} × {poses} poses",
+             f"first shard {ends[0]:.0f} s (compile included), second "
+             f"{ends[1] - ends[0]:.1f} s", f"{m_rate:,.0f}", f"{d0 / m_rate / 60:.0f} min",
              link(steady_log)]]
     return table(["backend", "objects × poses", "time", "labelled grasps/s (native: all; "
-                  "MJX: second shard)", "default D0 (204,800) at that rate", "record"], rows)
+                  "MJX: second shard)", f"default D0 ({d0:,}) at that rate", "record"], rows)
 
 
 @block("gpu-reruns")

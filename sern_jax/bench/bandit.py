@@ -415,16 +415,7 @@ def _copy_split(s: BanditSetup, plan, t: timing.Timing) -> dict[str, Any]:
     from sern_jax.engine import drive as executor
 
     w = s.workload
-    root = jax.random.key(w.seed)
-    sharding = None
-    if plan.mesh is not None:
-        sharding = jax.sharding.NamedSharding(
-            plan.mesh, jax.sharding.PartitionSpec(plan.mesh.axis_names[0]))
-    fn = executor._compiled(plan, root.dtype)
-
-    def keys_of(start: int):
-        keys = executor._seed_keys_jit(root, plan.chunk, np.uint32(plan.first_seed + start))
-        return keys if sharding is None else jax.device_put(keys, sharding)
+    fn = executor._compiled(plan, jax.random.key(w.seed).dtype)
 
     def size_of(start: int) -> int:
         return min(plan.chunk, plan.num_seeds - start)
@@ -433,16 +424,12 @@ def _copy_split(s: BanditSetup, plan, t: timing.Timing) -> dict[str, Any]:
     for _ in range(w.repeats):
         held: dict[int, Any] = {}
 
-        def launch(start, premade):
-            return fn(premade.pop(start) if premade else keys_of(start), *plan.args)
-
         def keep(start, out):
             held[start] = jax.block_until_ready(out)
             return size_of(start)
 
         t0 = time.perf_counter()
-        premade = {st: keys_of(st) for st in plan.starts} if plan.workers > 1 else {}
-        executor._drive(plan, lambda st: launch(st, premade), keep, None)
+        executor._drive(plan, executor._launcher(plan, w.seed, fn), keep, None)
         compute_times.append(time.perf_counter() - t0)
         copied_bytes = int(sum(x.nbytes for x in jax.tree.leaves(held)))
 

@@ -122,13 +122,23 @@ def run_plan(plan: RunPlan, seed: int = 0, progress: Callable[[int], None] | Non
     call's outputs), or with ``plan.summary`` the merged :class:`RunSummary`. ``progress`` is
     called with the number of seeds finished after each call.
     """
+    sink = _Summaries(plan) if plan.summary else _SeedArrays(plan)
+    _drive(plan, _launcher(plan, seed), sink.collect, progress)
+    return sink.result()
+
+
+def _launcher(plan: RunPlan, seed: int, fn: Callable | None = None) -> Callable:
+    """``launch(start)``: the plan's compiled call on the seeds from ``start`` (keys
+    ``fold_in(key(seed), first_seed + start + i)``), asynchronous on an accelerator. With
+    several workers every call's keys are made here, in the calling thread: worker threads
+    only run the compiled program (no tracing or eager dispatch in threads). ``fn``: the
+    plan's ``_compiled`` call, when the caller already holds it."""
     root = jax.random.key(seed)
     sharding = None
     if plan.mesh is not None:
         sharding = jax.sharding.NamedSharding(
             plan.mesh, jax.sharding.PartitionSpec(plan.mesh.axis_names[0]))
-    fn = _compiled(plan, root.dtype)
-    sink = _Summaries(plan) if plan.summary else _SeedArrays(plan)
+    fn = fn or _compiled(plan, root.dtype)
 
     def keys_of(start: int):
         keys = _seed_keys_jit(root, plan.chunk, np.uint32(plan.first_seed + start))
@@ -136,20 +146,15 @@ def run_plan(plan: RunPlan, seed: int = 0, progress: Callable[[int], None] | Non
             keys = jax.device_put(keys, sharding)
         return keys
 
-    premade = {}
-    if plan.workers > 1:
-        # every call's keys made here, in the calling thread: worker threads only run the
-        # compiled program (no tracing or eager dispatch in threads)
-        premade = {start: keys_of(start) for start in plan.starts}
+    premade = {start: keys_of(start) for start in plan.starts} if plan.workers > 1 else {}
 
     def launch(start: int):
         keys = premade.pop(start) if premade else keys_of(start)
         size = min(plan.chunk, plan.num_seeds - start)
         extra = (jnp.asarray(size, jnp.int32),) if plan.summary else ()
-        return fn(keys, *plan.args, *extra)  # asynchronous on an accelerator
+        return fn(keys, *plan.args, *extra)
 
-    _drive(plan, launch, sink.collect, progress)
-    return sink.result()
+    return launch
 
 
 def _compiled(plan: RunPlan, key_dtype) -> Callable:

@@ -57,6 +57,7 @@ class GraspBenchConfig:
     quality_batch: int = 64  # minibatch of the quality-network training-step timing
     objects: tuple[str, ...] = ()  # a batch of objects for objects_benchmark; () skips
     objects_trials: int = 64  # trials per object of objects_benchmark
+    mjx_reference: bool = False  # objects_benchmark: also MJX's own Hessian assembly
 
 
 def random_grasps(key, model, n):
@@ -128,7 +129,8 @@ def measure_agreement(objects, trials_per_object, seed=0, progress=None) -> dict
 
 
 def objects_benchmark(objects, trials_per_object: int, threads: int | None = None,
-                      repeats: int = 2, log: Callable[[str], None] | None = None) -> dict:
+                      repeats: int = 2, log: Callable[[str], None] | None = None,
+                      reference: bool = False) -> dict:
     """Trials/s of a batch of different objects per backend, and ``mjx_compiles``.
 
     Native: each object's ``GraspSimulator`` on ``threads``, one object after another. MJX:
@@ -137,6 +139,11 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
     MJX trial programs after the batch ran in its order and in reverse (a new batch): 1 when
     one program serves every object. Object i: resting pose seed i, ``trials_per_object``
     grasps from ``random_grasps`` and noise from ``sim.sample_noise``.
+
+    With ``reference``, the same batch also runs with MJX's own assembly of the Newton
+    Hessian (``hessian="mjx"``, a second program) under ``"mjx_reference"``, beside the
+    block assembly that every MJX trial uses (``"mjx"``), with ``"paired_agreement"``:
+    the fraction of trials whose success is the same under both.
     """
     import jax
     import numpy as np
@@ -173,8 +180,23 @@ def objects_benchmark(objects, trials_per_object: int, threads: int | None = Non
            "success_rate": float(np.mean([r.success.mean() for r in tm.result]))}
     log(f"objects mjx:    {mjx['trials_per_s']:9.1f} trials/s, {reverse.compiles} compiled "
         f"program(s) (first call {tm.first_s:.1f} s)")
-    return {"objects": [s.name for s in specs], "trials_per_object": n,
-            "mjx_compiles": reverse.compiles, "native": native, "mjx": mjx}
+    out = {"objects": [s.name for s in specs], "trials_per_object": n,
+           "mjx_compiles": reverse.compiles, "native": native, "mjx": mjx}
+    if reference:
+        blocks = tm.result
+        ref = sim.UniformBatch(models, sim.TrialConfig(), batch.shape, trials=n,
+                               hessian="mjx")
+        tr = timing.time_calls(lambda: ref.run_trials(grasps, stacked), repeats, warmup=1)
+        out["mjx_reference"] = {
+            "hessian": "mjx", "trials_per_s": total / tr.best_s, "seconds": tr.best_s,
+            "first_call_s": tr.first_s, "compile_s": max(tr.first_s - tr.best_s, 0.0),
+            "success_rate": float(np.mean([r.success.mean() for r in tr.result]))}
+        out["mjx_speedup"] = mjx["trials_per_s"] / out["mjx_reference"]["trials_per_s"]
+        out["paired_agreement"] = float(np.mean(np.concatenate(
+            [a.success == b.success for a, b in zip(blocks, tr.result)])))
+        log(f"objects mjx (MJX's own Hessian): {total / tr.best_s:9.1f} trials/s; blocks "
+            f"{out['mjx_speedup']:.2f}x, paired agreement {out['paired_agreement']:.3f}")
+    return out
 
 
 def dataset_rates(backend: str, stats: list[dict], seconds: float, objects_per_shard: int,
@@ -374,7 +396,8 @@ def grasp_benchmark(cfg: GraspBenchConfig = GraspBenchConfig(),
         stages["mjx_trial_s"] = rows[-1]["seconds"] / rows[-1]["batch"]
     out["backends"] = backends
     if cfg.objects:
-        out["objects"] = objects_benchmark(cfg.objects, cfg.objects_trials, threads, repeats, log)
+        out["objects"] = objects_benchmark(cfg.objects, cfg.objects_trials, threads, repeats, log,
+                                           reference=cfg.mjx_reference)
         out["mjx_compiles"] = out["objects"]["mjx_compiles"]
 
     # Depth images and candidate sets (depth.py and candidates.py on this scene).

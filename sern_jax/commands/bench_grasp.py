@@ -68,6 +68,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="a batch of objects (csv) timed per backend, MJX as one program over "
                         "objects x trials (reports mjx_compiles); trials per object: the largest "
                         "--mjx-batch")
+    p.add_argument("--mjx-reference", action="store_true",
+                   help="with --objects: also time the batch with MJX's own assembly of the "
+                        "Newton Hessian (a second compile) beside the per-contact block "
+                        "assembly every MJX trial uses; reports mjx_speedup and the paired "
+                        "agreement of the two")
     p.add_argument("--dataset-objects", type=int, default=0,
                    help="generate a D0 slice of this many objects per backend (temporary "
                         "directories) and report seconds, trials/s, the host-contexts / trials "
@@ -144,6 +149,8 @@ def _validate(args) -> None:
                 objects_lib.resolve_object(n)
             except (ValueError, OSError) as e:
                 raise ValueError(f"--objects: {e}") from None
+    if args.mjx_reference and not args.objects.strip():
+        raise ValueError("--mjx-reference times the --objects batch: name --objects too")
     if args.agreement:
         from sern_jax.grasp.world import objects as objects_lib
 
@@ -179,7 +186,8 @@ def run(args) -> int:
             quality_sets=args.quality_sets, quality_batch=args.quality_batch,
             objects=tuple(n for n in args.objects.split(",") if n),
             objects_trials=8 if quick else max(_csv_ints(args.mjx_batch, "--mjx-batch")
-                                               or [64]))
+                                               or [64]),
+            mjx_reference=args.mjx_reference)
         try:
             objects_lib.resolve_object(args.object)
         except (ValueError, OSError) as e:

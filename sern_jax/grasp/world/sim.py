@@ -529,7 +529,7 @@ class TrialOutcome(NamedTuple):
     gap: jax.Array  # [] final distance between the pads' inner faces, metres
 
 
-def make_execute(config: TrialConfig, model: mujoco.MjModel):
+def make_execute(config: TrialConfig, model: mujoco.MjModel, hessian: str = "blocks"):
     """A pure, unbatched MJX grasp trial for scenes shaped like ``model``.
 
     The scene's structure (indices, finger range, timestep) is read from ``model`` on the
@@ -540,6 +540,9 @@ def make_execute(config: TrialConfig, model: mujoco.MjModel):
     Args:
       config: trial schedule and success rule.
       model: a grasp scene (``scene.build_scene`` / ``context.scene_model``).
+      hessian: how the Newton solver assembles its constraint Hessian: ``"blocks"``
+        (per-contact cone blocks, :mod:`sern_jax.grasp.world.mjx_solver`) or ``"mjx"``
+        (MJX's own dense assembly, the reference; same matrix, other summation order).
 
     Returns:
       ``execute(mx, pose, grasp, trial_params) -> TrialOutcome`` where ``mx`` is
@@ -555,15 +558,17 @@ def make_execute(config: TrialConfig, model: mujoco.MjModel):
         raise ValueError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
     ids = scene_lib.scene_ids(model)
     return _make_execute(
-        ids, config, _half_open(model, ids), float(model.opt.timestep)
+        ids, config, _half_open(model, ids), float(model.opt.timestep), hessian
     )
 
 
 @functools.lru_cache(maxsize=16)
 def _make_execute(
-    ids: scene_lib.SceneIds, config: TrialConfig, half_open: float, timestep: float
+    ids: scene_lib.SceneIds, config: TrialConfig, half_open: float, timestep: float,
+    hessian: str = "blocks",
 ):
     """make_execute's function, one per static structure (so jit caches are shared)."""
+    from sern_jax.grasp.world import mjx_solver
     from sern_jax.grasp.world._mjx import mjx
 
     obj_geoms = np.asarray(ids.object_geoms)
@@ -575,6 +580,9 @@ def _make_execute(
         # allowed here even when the caller sets jax_numpy_rank_promotion="raise".
         with jax.numpy_rank_promotion("allow"):
             return _execute(mx, pose, grasp, trial_params)
+
+    if hessian not in mjx_solver.HESSIANS:
+        raise ValueError(f"hessian must be one of {mjx_solver.HESSIANS}, got {hessian!r}")
 
     def _execute(mx, pose, grasp, trial_params):
         palm0, ctrl = _schedule(
@@ -605,7 +613,7 @@ def _make_execute(
         success = finite & (rise >= config.success_lift) & (gap > 0.002)
         return TrialOutcome(success=success, finite=finite, rise=rise, gap=gap)
 
-    return execute
+    return mjx_solver.block_hessian(execute, hessian)
 
 
 @functools.lru_cache(maxsize=16)
@@ -695,6 +703,8 @@ class UniformBatch:
       prepared: optional ``UniformBatch.prepare(model, shape)`` of every model, made ahead
         (e.g. in threads, while another batch runs); None makes them here. A model may
         appear twice (one prepared pair serves both).
+      hessian: the Newton Hessian's assembly (:func:`make_execute`): ``"blocks"`` or the
+        reference ``"mjx"``.
 
     Attributes:
       uniform: the uniform ``MjModel`` of each object (native MuJoCo runs them too).
@@ -704,7 +714,7 @@ class UniformBatch:
     """
 
     def __init__(self, models, config: TrialConfig = TrialConfig(), shape=None,
-                 trials: int = 64, prepared=None):
+                 trials: int = 64, prepared=None, hessian: str = "blocks"):
         from sern_jax.grasp.world import uniform
 
         models = list(models)
@@ -722,7 +732,7 @@ class UniformBatch:
         self.config, self.shape, self.trials = config, shape, trials
         self.uniform = [u for u, _ in prepared]
         self.mx = uniform.stack_models([mx for _, mx in prepared])
-        self.program = _objects_program(make_execute(config, self.uniform[0]))
+        self.program = _objects_program(make_execute(config, self.uniform[0], hessian))
         self.pose0 = np.stack([scene_lib.object_pose(m) for m in self.uniform])
 
     @staticmethod

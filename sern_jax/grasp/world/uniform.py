@@ -78,7 +78,9 @@ MAX_FACE_VERTICES = 20  # MJX's most vertices per (merged coplanar) hull face
 RESAMPLE_TOLERANCE = 0.15
 
 
-MJX_PROGRAM = "uniform-1"  # the MJX scenes' structure: a change makes MJX runs other runs
+# The MJX trial program's version (the uniform scenes' structure and the Newton Hessian's
+# assembly, sim.make_execute): a change makes MJX runs other runs.
+MJX_PROGRAM = "uniform-2"
 
 
 @dataclasses.dataclass(frozen=True)

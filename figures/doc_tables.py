@@ -1427,6 +1427,66 @@ def performance_d0() -> str:
                   "MJX: second shard)", f"default D0 ({d0:,}) at that rate", "record"], rows)
 
 
+@block("performance-mjx-step")
+def performance_mjx_step() -> str:
+    """The Newton Hessian's assembly (cone blocks against MJX's own), what bounds an MJX step
+    on one GPU, and D0 per backend with the block assembly."""
+    folder = RESULTS / "mjx_one_program"
+    ob = _json(folder / "bench_objects_blocks_h200.json")["objects"]
+    nd = _json(folder / "bench_objects_nondet_h200.json")["objects"]
+    n = ob["trials_per_object"] * len(ob["objects"])
+    batch = f"{len(ob['objects'])} objects × {ob['trials_per_object']:,} trials"
+    rows = [["cone blocks (every MJX trial)", "on (default)", batch,
+             f"{ob['mjx']['trials_per_s']:,.0f}", link(folder / "bench_objects_blocks_h200.json")],
+            ["MJX's own dense assembly (`--mjx-reference`)", "on (default)", batch,
+             f"{ob['mjx_reference']['trials_per_s']:,.0f}",
+             link(folder / "bench_objects_blocks_h200.json")],
+            ["cone blocks", "off (`SERN_GPU_NONDETERMINISTIC=1`)", batch,
+             f"{nd['mjx']['trials_per_s']:,.0f}", link(folder / "bench_objects_nondet_h200.json")],
+            ["native MuJoCo, 16 host cores", "—", batch, f"{ob['native']['trials_per_s']:,.0f}",
+             link(folder / "bench_objects_blocks_h200.json")]]
+    assert n == nd["trials_per_object"] * len(nd["objects"])
+    text = table(["MJX Hessian assembly", "deterministic options", "batch", "trials/s",
+                  "record"], rows)
+    ph = {d: _json(folder / f"phase_cost_{d}_h200.json") for d in ("det", "nondet")}
+    prow = [[("on (default)" if d == "det" else "off"), f"{r['batch']:,}",
+             f"{r['collision_ms']:.1f} ms", f"{r['fwd_position_ms']:.1f} ms",
+             f"{r['forward_ms']:.1f} ms", f"{r['step_ms']:.1f} ms",
+             f"{100 * (r['step_ms'] - r['fwd_position_ms']) / r['step_ms']:.0f} %",
+             link(folder / f"phase_cost_{d}_h200.json")] for d, r in ph.items()]
+    text += "\n\nOne MJX step of the uniform scene, by phase (each column includes the ones before it):\n\n"
+    text += table(["deterministic options", "scenes", "collision", "position stage (with collision)",
+                   "forward", "step", "share after the position stage", "record"], prow)
+    hs = _json(folder / "step_cost_hull_sizes_h200.json")
+    ms = [r["ms_per_step"] for r in hs]
+    sizes = ", ".join(f"{r['vertices']} vertices / faces of {r['face_vertices']}" for r in hs)
+    text += (f"\n\nHull size does not move it: {hs[0]['batch']:,} scenes step in "
+             f"{min(ms):.1f}–{max(ms):.1f} ms for hulls of {sizes} "
+             f"({link(folder / 'step_cost_hull_sizes_h200.json')}).")
+    ag = _json(folder / "agreement_blocks_h200.json")["pooled"]["native_vs_mjx_uniform"]
+    old = _json(folder / "agreement_h200.json")["pooled"]["native_vs_mjx_uniform"]
+    text += (f" With the block assembly, native MuJoCo and MJX agree on {pct(ag['agreement'])} "
+             f"of the ten objects' 256 paired trials each ([{100 * ag['ci95'][0]:.1f}, "
+             f"{100 * ag['ci95'][1]:.1f}] %, 95 % Clopper–Pearson), against "
+             f"{pct(old['agreement'])} with MJX's own "
+             f"({link(folder / 'agreement_blocks_h200.json')}); the two assemblies give the same "
+             f"outcome on {pct(ob['paired_agreement'])} of the {n:,} trials above.")
+    d0 = _json(folder / "bench_d0_blocks_h200.json")["dataset"]
+    drow = []
+    for b, name in (("native", "native MuJoCo, 16 host cores"), ("mjx", "MJX, cone blocks")):
+        r = d0[b]
+        rate = r["trials_per_s"] if b == "native" else r["rest_trials_per_s"]
+        drow.append([name, f"{r['objects']} × {d0['poses']} poses", f"{r['seconds']:.1f} s",
+                     f"{rate:,.0f}", f"{r['projections']['d0_default']['seconds'] / 60:.1f} min",
+                     r["bound"], link(folder / "bench_d0_blocks_h200.json")])
+    text += ("\n\nD0 per backend with the block assembly, side by side in one run "
+             "(`sern bench grasp --dataset-objects 20`; MJX's rate from the shards after the "
+             "first):\n\n")
+    text += table(["backend", "objects × poses", "time", "trials/s", "default D0 projected",
+                   "bound", "record"], drow)
+    return text
+
+
 @block("gpu-reruns")
 def gpu_reruns() -> str:
     """Reruns on one GPU: every saved array of two runs of one command compared."""

@@ -56,6 +56,7 @@ def test_bad_sizes_exit_2_naming_the_flag(argv, needle):
     (["--dataset-objects", "2", "--dataset-poses", "0"], "--dataset-poses"),
     (["--dataset-objects", "2", "--dataset-backends", "native,gpu"], "--dataset-backends"),
     (["--dataset-backends", "mjx,mjx"], "--dataset-backends"),
+    (["--mjx-reference"], "--mjx-reference"),  # times the --objects batch: needs --objects
 ])
 def test_bad_dataset_flags_are_refused_before_any_work(argv, needle):
     from sern_jax.commands import bench_grasp

@@ -1493,15 +1493,17 @@ def gpu_reruns() -> str:
     folder = RESULTS / "gpu_public_path"
     rows = []
     for name in ("rerun_learn_6959a83.json", "rerun_learn_mjx_ed76b63.json",
-                 "rerun_regret_ed76b63.json", "rerun_regret_nondet_ed76b63.json"):
+                 "rerun_learn_mjx_656d84a.json", "rerun_regret_ed76b63.json",
+                 "rerun_regret_nondet_ed76b63.json"):
         r = _json(folder / name)
         cmd = r["command"].replace(" --no-figures", "").replace(" --no-progress", "")
         opts = "off" if r.get("nondeterministic") else "on (default)"
         same = "yes" if not r["arrays_differing"] else "no"
-        rows.append([f"`{cmd}`", opts, f"{len(r['arrays_differing'])} of {r['arrays']}",
+        rows.append([f"`{cmd}`", name.rsplit("_", 1)[1].split(".")[0], opts,
+                     f"{len(r['arrays_differing'])} of {r['arrays']}",
                      f"{r['elements_differing']:,}", same,
                      " / ".join(f"{w:.0f} s" for w in r["wall_s"]), link(folder / name)])
-    return table(["command, run twice", "deterministic options", "arrays that differ",
+    return table(["command, run twice", "code", "deterministic options", "arrays that differ",
                   "elements that differ", "bit for bit", "wall time, each run", "record"], rows)
 
 

@@ -32,7 +32,7 @@ def _problem(seed):
             rng.random(nefc) < 0.6, h, addr[cones], kinds[cones])
 
 
-@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("seed", range(6))
 def test_block_hessian_equals_the_dense_assembly(seed):
     J, D, active, h, addr, dim = _problem(seed)
     got = np.asarray(mjx_solver.cone_hessian(jnp.asarray(J), jnp.asarray(D),
@@ -67,14 +67,38 @@ _SLIDING_BOX = """
 """
 
 
-def test_blocks_inside_the_wrapped_function_and_mjx_outside(monkeypatch):
+def _sliding_box():
     model = mujoco.MjModel.from_xml_string(_SLIDING_BOX)
-    mx = mjx.put_model(model)
     data = mujoco.MjData(model)
     data.qvel[0] = 0.5  # the box slides: its cones are in the middle zone
     mujoco.mj_forward(model, data)
-    d = mjx.put_data(model, data)
+    return mjx.put_model(model), mjx.put_data(model, data)
 
+
+def test_the_newton_direction_equals_mjxs():
+    """The whole replacement (Hessian, Cholesky, direction) against MJX's own function on
+    one solver context, away from the optimum (qacc shifted) with cones in the middle zone."""
+    from mujoco.mjx._src import solver
+
+    mx, d = _sliding_box()
+    d = d.replace(qacc=d.qacc + 1.0)
+    mjx_solver.install()
+
+    def directions(m, d):
+        with jax.numpy_rank_promotion("allow"):  # MJX's own code promotes ranks
+            ctx = solver.Context.create(m, d, grad=False)
+            blocks = mjx_solver._update_gradient_blocks(m, d, ctx).Mgrad
+            without = mjx_solver._update_gradient_blocks(m, d, ctx.replace(h=0 * ctx.h)).Mgrad
+            return blocks, mjx_solver._original(m, d, ctx).Mgrad, without, ctx.h
+
+    blocks, reference, without, h = (np.asarray(x) for x in jax.jit(directions)(mx, d))
+    assert np.abs(h).max() > 0.1  # the cone blocks are not zero
+    np.testing.assert_allclose(blocks, reference, rtol=1e-4, atol=1e-6 * np.abs(reference).max())
+    assert not np.allclose(without, reference, rtol=1e-3)  # control: the blocks matter
+
+
+def test_blocks_only_inside_the_wrapped_function(monkeypatch):
+    mx, d = _sliding_box()
     calls = []
     blocks = mjx_solver._update_gradient_blocks
     monkeypatch.setattr(mjx_solver, "_update_gradient_blocks",
@@ -84,17 +108,14 @@ def test_blocks_inside_the_wrapped_function_and_mjx_outside(monkeypatch):
         with jax.numpy_rank_promotion("allow"):  # MJX's own code promotes ranks
             return mjx.forward(m, d).qacc
 
-    reference = jax.jit(forward)(mx, d)
-    assert not calls  # traced outside: MJX's own assembly
-    wrapped = jax.jit(mjx_solver.block_hessian(forward))(mx, d)
-    assert calls  # traced inside: the block assembly
+    jax.make_jaxpr(forward)(mx, d)  # traced outside: MJX's own assembly
+    assert not calls
+    jax.make_jaxpr(mjx_solver.block_hessian(forward))(mx, d)  # inside: the block assembly
+    assert calls
     n = len(calls)
-    again = jax.jit(forward)(mx, d)
-    assert len(calls) == n  # and outside again afterwards
-    np.testing.assert_allclose(np.asarray(wrapped), np.asarray(reference), rtol=1e-4,
-                               atol=1e-4)
-    np.testing.assert_array_equal(np.asarray(again), np.asarray(reference))
-    assert abs(float(np.asarray(reference)[0])) > 0.1  # friction decelerates it
+    jax.make_jaxpr(forward)(mx, d)  # and outside again afterwards
+    assert len(calls) == n
+    assert mjx_solver.block_hessian(forward, "mjx") is forward
 
 
 def test_unknown_hessian_is_refused():

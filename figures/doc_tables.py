@@ -1436,18 +1436,29 @@ def performance_mjx_step() -> str:
     nd = _json(folder / "bench_objects_nondet_h200.json")["objects"]
     n = ob["trials_per_object"] * len(ob["objects"])
     batch = f"{len(ob['objects'])} objects × {ob['trials_per_object']:,} trials"
+    gpu = "one NVIDIA H200"
     rows = [["cone blocks (every MJX trial)", "on (default)", batch,
-             f"{ob['mjx']['trials_per_s']:,.0f}", link(folder / "bench_objects_blocks_h200.json")],
+             f"{ob['mjx']['trials_per_s']:,.0f}", gpu,
+             link(folder / "bench_objects_blocks_h200.json")],
             ["MJX's own dense assembly (`--mjx-reference`)", "on (default)", batch,
-             f"{ob['mjx_reference']['trials_per_s']:,.0f}",
+             f"{ob['mjx_reference']['trials_per_s']:,.0f}", gpu,
              link(folder / "bench_objects_blocks_h200.json")],
             ["cone blocks", "off (`SERN_GPU_NONDETERMINISTIC=1`)", batch,
-             f"{nd['mjx']['trials_per_s']:,.0f}", link(folder / "bench_objects_nondet_h200.json")],
+             f"{nd['mjx']['trials_per_s']:,.0f}", gpu,
+             link(folder / "bench_objects_nondet_h200.json")],
             ["native MuJoCo, 16 host cores", "—", batch, f"{ob['native']['trials_per_s']:,.0f}",
-             link(folder / "bench_objects_blocks_h200.json")]]
+             "its 16-core Intel Xeon host", link(folder / "bench_objects_blocks_h200.json")]]
     assert n == nd["trials_per_object"] * len(nd["objects"])
-    text = table(["MJX Hessian assembly", "deterministic options", "batch", "trials/s",
-                  "record"], rows)
+    cpu_path = folder / "bench_objects_blocks_2core.json"
+    cpu = _json(cpu_path)
+    co, hw = cpu["objects"], _hardware(cpu["machine"])
+    cbatch = f"{len(co['objects'])} objects × {co['trials_per_object']:,} trials"
+    rows += [["cone blocks (every MJX trial)", "—", cbatch, f"{co['mjx']['trials_per_s']:,.1f}",
+              hw, link(cpu_path)],
+             ["MJX's own dense assembly (`--mjx-reference`)", "—", cbatch,
+              f"{co['mjx_reference']['trials_per_s']:,.1f}", hw, link(cpu_path)]]
+    text = table(["MJX Hessian assembly", "deterministic options (GPU)", "batch", "trials/s",
+                  "hardware", "record"], rows)
     ph = {d: _json(folder / f"phase_cost_{d}_h200.json") for d in ("det", "nondet")}
     prow = [[("on (default)" if d == "det" else "off"), f"{r['batch']:,}",
              f"{r['collision_ms']:.1f} ms", f"{r['fwd_position_ms']:.1f} ms",

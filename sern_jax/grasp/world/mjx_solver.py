@@ -7,7 +7,8 @@ as ``J' C J``, where ``C`` is a dense ``nefc x nefc`` matrix: ``diag(D * active)
 Python loop. Its cost grows with ``nefc**2`` per contact, and on a GPU each block is a
 separate update of a ``[batch, nefc, nefc]`` array. A uniform scene
 (:mod:`sern_jax.grasp.world.uniform`) has 16 contact pairs (4 parts x table, palm and two
-pads), 64 contacts and 226 constraint rows, so that loop dominates a trial step.
+pads), 64 contacts and 226 constraint rows, so on a CPU that loop is most of a trial step
+(docs/PERFORMANCE.md, "What bounds an MJX trial").
 
 :func:`cone_hessian` computes the same matrix as a sum that never forms ``C``::
 
@@ -107,11 +108,11 @@ def install() -> None:
     global _original
     with _install_lock:
         solver = _solver()
-        if solver._update_gradient is _dispatch:
-            return
         if not hasattr(solver, "_update_gradient"):
             raise RuntimeError("mujoco.mjx has no solver._update_gradient: this mujoco-mjx "
                                "version is not supported by sern_jax's block Hessian")
+        if solver._update_gradient is _dispatch:
+            return
         _original = solver._update_gradient
         solver._update_gradient = _dispatch
 

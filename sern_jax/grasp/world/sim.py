@@ -581,9 +581,6 @@ def _make_execute(
         with jax.numpy_rank_promotion("allow"):
             return _execute(mx, pose, grasp, trial_params)
 
-    if hessian not in mjx_solver.HESSIANS:
-        raise ValueError(f"hessian must be one of {mjx_solver.HESSIANS}, got {hessian!r}")
-
     def _execute(mx, pose, grasp, trial_params):
         palm0, ctrl = _schedule(
             jnp, grasp + trial_params.grasp_error, config, half_open, timestep

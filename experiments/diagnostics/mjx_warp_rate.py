@@ -1,6 +1,6 @@
 """MuJoCo Warp (mujoco-mjx's ``impl="warp"``) beside the JAX MJX trial, on one object's uniform scene.
 
-``python -m experiments.diagnostics.mjx_warp_rate OBJECT TRIALS[,TRIALS...] OUT.json``
+``python -m experiments.diagnostics.mjx_warp_rate OBJECT TRIALS[,TRIALS...] OUT.json [JAX_MAX]``
 
 For each batch size N: N random grasps (``bench.grasp.random_grasps``) with trial noise
 (``sim.sample_noise``) on OBJECT's uniform scene (``uniform.uniform_scene``), run by
@@ -42,7 +42,7 @@ from sern_jax.grasp.world._mjx import mjx  # noqa: E402
 
 CONTACTS_PER_WORLD = 32
 CONSTRAINTS_PER_WORLD = 160
-JAX_MAX = 4096  # the JAX trial is timed up to this batch; Warp at every size
+JAX_MAX = 4096  # the JAX trial is timed up to this batch (or argv[3]); Warp at every size
 
 
 def warp_model(u):
@@ -113,6 +113,7 @@ def timed(call, repeats=2):
 
 def main(argv):
     name, sizes, path = argv[0], [int(x) for x in argv[1].split(",")], argv[2]
+    jax_max = int(argv[3]) if len(argv) > 3 else JAX_MAX
     exact = scene_lib.build_scene(objects_lib.resolve_object(name), seed=0)
     shape = uniform.shape_for(exact)
     u = uniform.uniform_scene(exact, shape)
@@ -134,7 +135,7 @@ def main(argv):
         g, z = grasps[:n], sim.TrialNoise(*(np.asarray(a)[:n] for a in noise))
         ref = native.success[:n]
         jx_success = None
-        if n <= JAX_MAX:
+        if n <= jax_max:
             jx = sim.GraspSimulator(exact, "mjx", mjx_batch=n)
             first, out, first_s, best = timed(lambda: jx.run_trials(g, z))
             rows.append({"backend": "mjx_jax", "object": name, "trials": n,
@@ -168,6 +169,9 @@ def main(argv):
                          "agreement_mjx_jax": (None if jx_success is None
                                                else float(np.mean(success == jx_success))),
                          "rerun_equal": bool(np.array_equal(first[1], rise)),
+                         "rerun_label_flips": int(np.sum(
+                             (first[0] & (first[1] >= config.success_lift) & (first[2] > 0.002))
+                             != success)),
                          "peak_contacts_all_worlds": int(peak[:, 0].max()),
                          "peak_constraints_per_world": int(peak[:, 1].max()),
                          "capacity": [n * CONTACTS_PER_WORLD, CONSTRAINTS_PER_WORLD]})

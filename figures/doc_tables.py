@@ -1539,6 +1539,42 @@ def performance_mjx_one_program() -> str:
             f"({link(RESULTS / 'mjx_one_program' / 'agreement_h200.json')}).")
 
 
+@block("performance-mjx-warp")
+def performance_mjx_warp() -> str:
+    """MuJoCo Warp stepping the trial beside the JAX MJX trial and native MuJoCo, same grasps."""
+    folder = RESULTS / "mjx_one_program"
+    names = {"native": "native MuJoCo, 16 host cores", "mjx_jax": "MJX (JAX), cone blocks",
+             "mjx_warp": "MuJoCo Warp"}
+    rows, failed = [], []
+    for name in ("warp_rate_prism_h200.json", "warp_prism_16k_h200.json",
+                 "warp_tless_4k_h200.json", "warp_tless_16k_h200.json",
+                 "warp_prism_65k_h200.json"):
+        for r in _json(folder / name)["rows"]:
+            if "error" in r:
+                failed.append((r["trials"], folder / name))
+                continue
+            warp = r["backend"] == "mjx_warp"
+            rows.append([
+                names[r["backend"]], r["object"], f"{r['trials']:,}",
+                f"{r['trials_per_s']:,.0f}",
+                f"{r['first_call_s']:.0f} s" if "first_call_s" in r else "—",
+                "reference" if r["backend"] == "native" else pct(r["agreement_native"]),
+                "—" if r["backend"] == "native" else ("yes" if r["rerun_equal"] else "no"),
+                str(r["rerun_label_flips"]) if "rerun_label_flips" in r else "—",
+                "its 16-core Intel Xeon host" if r["backend"] == "native" else "one NVIDIA H200",
+                link(folder / name)])
+            assert not warp or r["nonfinite"] == 0
+    text = table(["backend", "object", "trials per call", "trials/s", "first call",
+                  "agreement with native", "same bits on a second call",
+                  "labels changed on a second call", "hardware", "record"], rows)
+    sizes = sorted({n for n, _ in failed})
+    if sizes:
+        text += (f"\n\nAt {', '.join(f'{n:,}' for n in sizes)} trials per call the Warp "
+                 f"worlds did not fit beside JAX's buffers, preallocated or not "
+                 f"({', '.join(link(p) for _, p in failed)}).")
+    return text
+
+
 @block("performance-commands")
 def performance_commands() -> str:
     rows = []

@@ -160,7 +160,7 @@ def main(argv):
                     np.asarray(gap, np.float64), np.asarray(peak)
             first, out, first_s, best = timed(call)
             finite, rise, gap, peak = out
-            success = finite & (rise >= config.success_lift) & (gap > 0.002)
+            success = sim.succeeded(finite, rise, gap, config)
             rows.append({"backend": "mjx_warp", "object": name, "trials": n,
                          "first_call_s": first_s, "seconds": best, "trials_per_s": n / best,
                          "success_rate": float(success.mean()),
@@ -170,8 +170,7 @@ def main(argv):
                                                else float(np.mean(success == jx_success))),
                          "rerun_equal": bool(np.array_equal(first[1], rise)),
                          "rerun_label_flips": int(np.sum(
-                             (first[0] & (first[1] >= config.success_lift) & (first[2] > 0.002))
-                             != success)),
+                             sim.succeeded(*first[:3], config) != success)),
                          "peak_contacts_all_worlds": int(peak[:, 0].max()),
                          "peak_constraints_per_world": int(peak[:, 1].max()),
                          "capacity": [n * CONTACTS_PER_WORLD, CONSTRAINTS_PER_WORLD]})

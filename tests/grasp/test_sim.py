@@ -142,3 +142,18 @@ def test_mjx_pads_odd_batches_without_changing_results(mjx_sim, paired_trials):
     assert five.success.shape == (5,)  # padded to 8: the same compiled program
     np.testing.assert_array_equal(five.success, base.success[:5])
     np.testing.assert_allclose(five.rise, base.rise[:5], atol=1e-6)
+
+
+def test_success_rule_at_its_edges_on_numpy_and_jax_arrays():
+    """``sim.succeeded``: a rise of exactly ``success_lift`` counts, a gap of exactly
+    ``CLOSED_GAP`` (jaws shut on nothing) does not, a diverged trial never does; NumPy and
+    JAX arrays give the same answers (the native and MJX paths both call it)."""
+    config = sim.TrialConfig()
+    lift, closed = config.success_lift, sim.CLOSED_GAP
+    finite = np.array([True, True, True, True, False, True])
+    rise = np.array([lift, lift - 1e-6, lift, 0.2, 0.2, np.nan])
+    gap = np.array([0.03, 0.03, closed, closed + 1e-6, 0.03, 0.03])
+    expected = np.array([True, False, False, True, False, False])
+    np.testing.assert_array_equal(sim.succeeded(finite, rise, gap, config), expected)
+    as_jax = sim.succeeded(*(jax.numpy.asarray(a) for a in (finite, rise, gap)), config)
+    np.testing.assert_array_equal(np.asarray(as_jax), expected)

@@ -75,6 +75,7 @@ __all__ = [
     "MIN_GRASP_Z",
     "QPOS_LIMIT",
     "QVEL_LIMIT",
+    "CLOSED_GAP",
     "TrialConfig",
     "TrialNoise",
     "TrialResult",
@@ -171,6 +172,16 @@ class TrialConfig:
             + self.shake_steps
             + self.hold_steps
         )
+
+
+CLOSED_GAP = 0.002  # metres: a jaw gap at or below this means the jaws closed on nothing
+
+
+def succeeded(finite, rise, gap, config: TrialConfig):
+    """The success rule of every backend (NumPy or JAX arrays alike): the trial stayed
+    finite, the object rose at least ``config.success_lift``, and the jaws did not close on
+    nothing (gap > ``CLOSED_GAP``)."""
+    return finite & (rise >= config.success_lift) & (gap > CLOSED_GAP)
 
 
 def physics_settings(scene: scene_lib.SceneConfig | None = None,
@@ -499,7 +510,7 @@ class _NativeRunner:
                      [pool.submit(self._task, lo, hi, *args) for lo, hi in bounds]]
         nan, rise, gap = (np.concatenate(x) for x in zip(*parts))
         rise = np.where(nan, np.nan, rise)
-        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
+        success = succeeded(~nan, rise, gap, self.config)
         return TrialResult(success, nan, rise, gap, "native")
 
 
@@ -607,7 +618,7 @@ def _make_execute(
         (d, finite), _ = jax.lax.scan(step, (d, jnp.array(True)), ctrl)
         rise = d.qpos[qa + 2] - qpos0[qa + 2]
         gap = d.qpos[ids.finger_qpos[0]] + d.qpos[ids.finger_qpos[1]]
-        success = finite & (rise >= config.success_lift) & (gap > 0.002)
+        success = succeeded(finite, rise, gap, config)
         return TrialOutcome(success=success, finite=finite, rise=rise, gap=gap)
 
     return mjx_solver.block_hessian(execute, hessian)
@@ -671,7 +682,7 @@ class _MjxRunner:
         gap = np.concatenate(gap)[:n]
         # Decided here in float64, as the native backend does (out.success is the same
         # rule in float32).
-        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
+        success = succeeded(~nan, rise, gap, self.config)
         return TrialResult(success, nan, rise, gap, "mjx")
 
 
@@ -787,7 +798,7 @@ class UniformBatch:
         nan = ~np.concatenate(finite, 1)[:, :n]
         rise = np.where(nan, np.nan, np.concatenate(rise, 1)[:, :n])
         gap = np.concatenate(gap, 1)[:, :n]
-        success = (~nan) & (rise >= self.config.success_lift) & (gap > 0.002)
+        success = succeeded(~nan, rise, gap, self.config)
         return [TrialResult(success[i], nan[i], rise[i], gap[i], "mjx")
                 for i in range(o)]
 

@@ -44,11 +44,11 @@ hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 # ------------------------------------------------------------------------------ pytest-xdist
-# The default run (pyproject addopts: -n 3 --dist loadfile --no-loadscope-reorder) spreads the
-# suite over three worker processes. Most of its time is single-threaded XLA compilation, and a
+# The default run (pyproject addopts: -n 2 --dist loadfile --no-loadscope-reorder) spreads the
+# suite over two worker processes. Most of its time is single-threaded XLA compilation, and a
 # compiled program, a module fixture or a session fixture is shared only inside one process, so
 # each test file goes to one worker whole (loadfile). Files start heaviest first (HEAVY: the
-# longest files of the serial run), so no long file starts last while the other workers idle;
+# longest files of the serial run), so no long file starts last while the other worker idles;
 # the rest keep their collection order. (xdist's loadgroup, which could put files sharing a
 # session fixture together, does not group under pytest 9.2: it rewrites item._nodeid, which
 # pytest 9 no longer reads. Only tests/grasp/test_dataset.py and test_pretrain.py share one,

@@ -61,35 +61,25 @@ def warp_program(u, config: sim.TrialConfig, n: int):
     """jit(vmap(trial)) with MuJoCo Warp stepping the trial of ``sim.make_execute``."""
     ids = scene_lib.scene_ids(u)
     half_open, dt = sim._half_open(u, ids), float(u.opt.timestep)
-    obj_geoms = np.asarray(ids.object_geoms)
-    palm_idx = np.asarray(ids.palm_qpos + ids.finger_qpos)
-    body, qa = ids.object_body, ids.object_qpos
     d0 = mjx.make_data(u, impl="warp", naconmax=n * CONTACTS_PER_WORLD,
                        njmax=CONSTRAINTS_PER_WORLD)
 
     def execute(mx, pose, grasp, tp):
+        # the product trial's pieces (sim._make_execute), with Warp's data in place of MJX's
         palm0, ctrl = sim._schedule(jnp, grasp + tp.grasp_error, config, half_open, dt)
-        m = mx.replace(
-            geom_friction=mx.geom_friction.at[obj_geoms, 0].set(tp.friction),
-            body_mass=mx.body_mass.at[body].multiply(tp.mass_scale),
-            body_inertia=mx.body_inertia.at[body].multiply(tp.mass_scale),
-        )
-        qpos0 = mx.qpos0.at[qa:qa + 7].set(pose).at[palm_idx].set(palm0)
+        m, qpos0 = sim._trial_model(mx, ids, pose, palm0, tp)
         d = d0.replace(qpos=qpos0, ctrl=ctrl[0])
 
         def step(carry, ctrl_t):
             d, finite, peak = carry
             d = mjx.step(m, d.replace(ctrl=ctrl_t))
-            finite = (finite & jnp.all(jnp.abs(d.qpos) < sim.QPOS_LIMIT)
-                      & jnp.all(jnp.abs(d.qvel) < sim.QVEL_LIMIT))
             peak = jnp.maximum(peak, jnp.stack([jnp.max(d._impl.nacon),
                                                 jnp.max(d._impl.nefc)]).astype(jnp.int32))
-            return (d, finite, peak), None
+            return (d, sim._still_finite(finite, d), peak), None
 
         init = (d, jnp.array(True), jnp.zeros(2, jnp.int32))
         (d, finite, peak), _ = jax.lax.scan(step, init, ctrl)
-        rise = d.qpos[qa + 2] - qpos0[qa + 2]
-        gap = d.qpos[ids.finger_qpos[0]] + d.qpos[ids.finger_qpos[1]]
+        rise, gap = sim._rise_and_gap(d, qpos0, ids)
         return finite, rise, gap, peak
 
     def run(mx, poses, grasps, params):

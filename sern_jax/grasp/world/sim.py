@@ -573,6 +573,33 @@ def make_execute(config: TrialConfig, model: mujoco.MjModel, hessian: str = "blo
     )
 
 
+def _trial_model(mx, ids: scene_lib.SceneIds, pose, palm0, trial_params: TrialNoise):
+    """(the model with this trial's object friction and mass, the start qpos [nq]): the
+    object at ``pose``, palm and fingers at ``palm0``."""
+    obj_geoms = np.asarray(ids.object_geoms)
+    palm_idx = np.asarray(ids.palm_qpos + ids.finger_qpos)
+    body, qa = ids.object_body, ids.object_qpos
+    m = mx.replace(
+        geom_friction=mx.geom_friction.at[obj_geoms, 0].set(trial_params.friction),
+        body_mass=mx.body_mass.at[body].multiply(trial_params.mass_scale),
+        body_inertia=mx.body_inertia.at[body].multiply(trial_params.mass_scale),
+    )
+    return m, mx.qpos0.at[qa : qa + 7].set(pose).at[palm_idx].set(palm0)
+
+
+def _still_finite(finite, d):
+    """``finite`` and the state ``d`` within QPOS_LIMIT / QVEL_LIMIT (False for NaN too)."""
+    return (finite & jnp.all(jnp.abs(d.qpos) < QPOS_LIMIT)
+            & jnp.all(jnp.abs(d.qvel) < QVEL_LIMIT))
+
+
+def _rise_and_gap(d, qpos0, ids: scene_lib.SceneIds):
+    """(the object's rise above its start height, the jaw gap) at the state ``d``."""
+    qa = ids.object_qpos
+    return (d.qpos[qa + 2] - qpos0[qa + 2],
+            d.qpos[ids.finger_qpos[0]] + d.qpos[ids.finger_qpos[1]])
+
+
 @functools.lru_cache(maxsize=16)
 def _make_execute(
     ids: scene_lib.SceneIds, config: TrialConfig, half_open: float, timestep: float,
@@ -581,10 +608,6 @@ def _make_execute(
     """make_execute's function, one per static structure (so jit caches are shared)."""
     from sern_jax.grasp.world import mjx_solver
     from sern_jax.grasp.world._mjx import mjx
-
-    obj_geoms = np.asarray(ids.object_geoms)
-    palm_idx = np.asarray(ids.palm_qpos + ids.finger_qpos)
-    body, qa = ids.object_body, ids.object_qpos
 
     def execute(mx, pose, grasp, trial_params: TrialNoise) -> TrialOutcome:
         # MJX's own code relies on NumPy rank promotion (mjx/_src/smooth.py), so it is
@@ -596,28 +619,17 @@ def _make_execute(
         palm0, ctrl = _schedule(
             jnp, grasp + trial_params.grasp_error, config, half_open, timestep
         )
-        m = mx.replace(
-            geom_friction=mx.geom_friction.at[obj_geoms, 0].set(trial_params.friction),
-            body_mass=mx.body_mass.at[body].multiply(trial_params.mass_scale),
-            body_inertia=mx.body_inertia.at[body].multiply(trial_params.mass_scale),
-        )
-        qpos0 = mx.qpos0.at[qa : qa + 7].set(pose).at[palm_idx].set(palm0)
+        m, qpos0 = _trial_model(mx, ids, pose, palm0, trial_params)
         d = mjx.make_data(m)
         d = d.replace(qpos=qpos0, ctrl=ctrl[0])
 
         def step(carry, ctrl_t):
             d, finite = carry
             d = mjx.step(m, d.replace(ctrl=ctrl_t))
-            finite = (
-                finite
-                & jnp.all(jnp.abs(d.qpos) < QPOS_LIMIT)  # False for NaN too
-                & jnp.all(jnp.abs(d.qvel) < QVEL_LIMIT)
-            )
-            return (d, finite), None
+            return (d, _still_finite(finite, d)), None
 
         (d, finite), _ = jax.lax.scan(step, (d, jnp.array(True)), ctrl)
-        rise = d.qpos[qa + 2] - qpos0[qa + 2]
-        gap = d.qpos[ids.finger_qpos[0]] + d.qpos[ids.finger_qpos[1]]
+        rise, gap = _rise_and_gap(d, qpos0, ids)
         success = succeeded(finite, rise, gap, config)
         return TrialOutcome(success=success, finite=finite, rise=rise, gap=gap)
 
